@@ -1,0 +1,1 @@
+"""Gripper geometry and closed-loop control laws (ROS-free)."""

@@ -1,0 +1,1 @@
+"""Pressure-regulator backends behind one Protocol."""

@@ -1,0 +1,36 @@
+"""Setup script for the fpc_gripper ament_python package."""
+
+from glob import glob
+
+from setuptools import find_packages, setup
+
+package_name = 'fpc_gripper'
+
+setup(
+    name=package_name,
+    version='0.1.0',
+    packages=find_packages(exclude=['tests', 'tests.*', 'bench']),
+    package_data={'fpc_gripper': ['data/*.json']},
+    data_files=[
+        ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
+        ('share/' + package_name, ['package.xml']),
+        ('share/' + package_name + '/msg_configs', glob('msg_configs/*.yaml')),
+    ],
+    install_requires=['setuptools', 'numpy', 'scipy', 'PyYAML'],
+    zip_safe=True,
+    maintainer='fpc_gripper developers',
+    maintainer_email='dev@fpc-gripper.invalid',
+    description='CCM model and ROS 2 nodes for a fluidic prestressed composite gripper.',
+    license='Apache-2.0',
+    tests_require=['pytest'],
+    entry_points={
+        'console_scripts': [
+            'model_node = fpc_gripper.nodes.model_node:main',
+            'regulator_bridge = fpc_gripper.nodes.regulator_bridge:main',
+            'mcap_recorder = fpc_gripper.nodes.mcap_recorder:main',
+            'gripper_controller = fpc_gripper.nodes.gripper_controller:main',
+            'gripper_demo = fpc_gripper.nodes.gripper_demo:main',
+            'fpc-mcap = fpc_gripper.io.cli:main',
+        ],
+    },
+)
