@@ -1,0 +1,601 @@
+"""CCM equilibrium solver: damped Newton with warm starts, continuation and rigidity."""
+
+import enum
+import functools
+import math
+
+import numpy as np
+from scipy.linalg import eigh
+
+from .analysis import fit_circle, flexural_rigidity
+from .design import ActuatorDesign
+from .energy import load_derivatives, load_energy, segment_derivatives, segment_energy
+from .kinematics import from_scaled, midplane_samples, node_positions, to_scaled
+from .section import build_segments, uniform_edges
+
+__all__ = ['CCMSolver', 'CCMResult', 'RigidityResult', 'SolverStatus', 'PRESSURE_MODELS']
+
+#: Pressure-work coefficient k_p of Pi_P = -k_p P V (SPEC "Pressure work"); gamma = 1.4.
+PRESSURE_MODELS = {'adiabatic': 1.0 / (1.4 - 1.0), 'isobaric': 1.0}
+#: Largest Newton step in any scaled unknown; keeps iterates where the quintic PEMC
+#: energy (unbounded below at large tension) is meaningful.
+_MAX_STEP = 0.5
+_ARMIJO = 1e-4
+
+
+class SolverStatus(enum.IntEnum):
+    """Outcome of a solve; only SUCCESS has success=True."""
+
+    SUCCESS = 0
+    MAX_ITERATIONS = 1
+    LINE_SEARCH_FAILED = 2
+    NOT_FINITE = 3
+    UNSTABLE = 4
+    CONTINUATION_FAILED = 5
+
+
+_MESSAGES = {
+    SolverStatus.SUCCESS: 'converged: relative gradient {grad:.1e} <= {gtol:.0e} and last step '
+                          '{step:.1e} <= {xtol:.0e}',
+    SolverStatus.MAX_ITERATIONS: 'not converged after {iterations} Newton iterations '
+                                 '(relative gradient {grad:.1e})',
+    SolverStatus.LINE_SEARCH_FAILED: 'line search found no decrease (relative gradient '
+                                     '{grad:.1e}); the equilibrium may not exist nearby',
+    SolverStatus.NOT_FINITE: 'energy or gradient became non-finite',
+    SolverStatus.UNSTABLE: 'converged to an unstable equilibrium (Hessian not positive '
+                           'definite, smallest eigenvalue {min_eig:.2e})',
+    SolverStatus.CONTINUATION_FAILED: 'continuation in pressure and load stalled at '
+                                      '{fraction:.1%} of the requested loading',
+}
+
+
+class CCMResult:
+    """
+    Equilibrium of one finger, with OptimizeResult-like fields.
+
+    Attributes
+    ----------
+    success : bool
+        True only for a converged, stable equilibrium.
+    status : SolverStatus
+        Outcome code; `message` explains it.
+    message : str
+    iterations : int
+        Newton iterations, continuation steps included.
+    coefficients : ndarray, shape (N, 4)
+        (b1 [-], b3 [1/m^2], c1 [-], d [1/m]) of each segment.
+    points : ndarray, shape (M, 2)
+        Global (X, Z) midplane samples [m].
+    tangent : ndarray, shape (M,)
+        Tangent angle of each sample from +X towards +Z [rad].
+    tip : ndarray, shape (2,)
+        Global (X, Z) of the tip [m].
+    nodes : ndarray, shape (N + 1, 2)
+        Segment nodes [m].
+    beta : ndarray, shape (N,)
+        End rotations [rad].
+    valid : bool
+        Every segment obeys the small-rotation rule |2 d L_i| < 1.
+    curvature, fit_rmsd : float
+        Signed curvature of the least-squares circle [1/m] and its RMSD [m].
+    pressure : float
+        Gauge pressure [Pa].
+    tip_force : tuple of float
+        (f0, p0) [N].
+    energy : float
+        Total potential [J].
+
+    """
+
+    def __init__(self, solver, q, status, iterations, gradient, step, pressure, loads,
+                 tip_force, min_eig=float('nan'), fraction=1.0):
+        self.solver = solver
+        self.q = q
+        self.status = SolverStatus(status)
+        self.success = self.status is SolverStatus.SUCCESS
+        self.iterations = int(iterations)
+        self.gradient_norm = float(gradient)
+        self.last_step = float(step)
+        self.pressure = float(pressure)
+        self.tip_force = tuple(float(f) for f in tip_force)
+        self.point_loads = tuple(loads)
+        lengths = solver.segments.lengths
+        self.coefficients = from_scaled(q, lengths)
+        self.nodes, self.theta, self.beta = node_positions(q, lengths)
+        self.tip = self.nodes[-1].copy()
+        self.rotation_measure = np.abs(2.0 * q[:, 3])
+        self.valid = bool(np.all(self.rotation_measure < 1.0))
+        self.message = _MESSAGES[self.status].format(
+            grad=gradient, gtol=solver.gtol, step=step, xtol=solver.xtol,
+            iterations=iterations, min_eig=min_eig, fraction=fraction)
+        if self.success and not self.valid:
+            worst = int(np.argmax(self.rotation_measure))
+            self.message += (f'; segment {worst} breaks the small-rotation rule '
+                             f'|2 d L| = {self.rotation_measure[worst]:.3f} >= 1 (valid=False)')
+
+    @functools.cached_property
+    def _samples(self):
+        return midplane_samples(self.q, self.solver.segments.lengths,
+                                self.solver.samples_per_segment)
+
+    @property
+    def points(self):
+        """Global (X, Z) midplane samples, m per segment then the tip, shape (M, 2) [m]."""
+        return self._samples[0]
+
+    @property
+    def tangent(self):
+        """Tangent angle of each sample from +X towards +Z, shape (M,) [rad]."""
+        return self._samples[1]
+
+    @property
+    def x(self):
+        """Alias of `coefficients` flattened, as in scipy's OptimizeResult."""
+        return self.coefficients.ravel()
+
+    @functools.cached_property
+    def _circle(self):
+        return fit_circle(self.points)
+
+    @property
+    def curvature(self):
+        """Signed curvature of the least-squares circle [1/m], > 0 curling towards -Z."""
+        return self._circle.curvature
+
+    @property
+    def fit_rmsd(self):
+        """RMSD of the samples from the fitted circle [m]."""
+        return self._circle.rmsd
+
+    @functools.cached_property
+    def energy(self):
+        """Total potential at this state [J]."""
+        return self.solver._total_energy(self.q, self.pressure, self.point_loads)
+
+    def __repr__(self):
+        return (f'CCMResult(success={self.success}, status={self.status.name}, '
+                f'iterations={self.iterations}, tip={self.tip.round(6).tolist()}, '
+                f'valid={self.valid})')
+
+
+class RigidityResult:
+    """
+    Flexural rigidity by displacement control, eq. (22).
+
+    Attributes
+    ----------
+    value : float
+        K_x or K_z [N m^2].
+    force : float
+        End load that produces the displacement [N].
+    lever : float
+        Lever arm |Z_tip| (axis x) or |X_tip| (axis z) in the loaded state [m].
+    displacement : float
+        Imposed tip displacement [m].
+    success, message : bool, str
+    unloaded, loaded : CCMResult
+
+    """
+
+    def __init__(self, axis, displacement, force, lever, success, message, unloaded, loaded,
+                 iterations):
+        self.axis = axis
+        self.displacement = float(displacement)
+        self.force = float(force)
+        self.lever = float(lever)
+        self.value = flexural_rigidity(force, lever, displacement) if success else float('nan')
+        self.success = bool(success)
+        self.message = message
+        self.unloaded = unloaded
+        self.loaded = loaded
+        self.iterations = int(iterations)
+
+    def __repr__(self):
+        return (f'RigidityResult(axis={self.axis!r}, value={self.value:.6g}, '
+                f'force={self.force:.6g}, lever={self.lever:.6g}, success={self.success})')
+
+
+def _finite(name, value, unit):
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise TypeError(f'`{name}` must be a real number {unit}, got {value!r}')
+    value = float(value)
+    if not math.isfinite(value):
+        raise ValueError(f'`{name}` must be finite {unit}, got {value}')
+    return value
+
+
+class CCMSolver:
+    """
+    Chained composite model of one finger.
+
+    Parameters
+    ----------
+    design : ActuatorDesign
+        The finger.
+    n_segments : int
+        Number N of segments of equal length (split at load points if any).
+    pressure_model : {'adiabatic', 'isobaric'}
+        k_p = 1/(gamma - 1) (the paper's eq. 20) or 1 (a regulated source).
+    segment_edges : array_like, optional
+        Explicit edges from 0 to the free length [m]; overrides `n_segments`.
+    load_points : sequence of float
+        Arc lengths of intermediate point loads [m]; each becomes a segment edge.
+    samples_per_segment : int
+        Midplane samples m per segment.
+    max_iterations : int
+        Newton iterations per (sub)solve.
+    gtol : float
+        Gradient tolerance relative to the axial stiffness of a segment.
+    xtol : float
+        Largest final Newton step in the scaled unknowns.
+
+    References
+    ----------
+    Zhou, Headings, Dapino (2022), Section III; SPEC.
+
+    """
+
+    def __init__(self, design, n_segments=8, pressure_model='adiabatic', segment_edges=None,
+                 load_points=(), samples_per_segment=16, max_iterations=60, gtol=1e-10,
+                 xtol=1e-9):
+        if not isinstance(design, ActuatorDesign):
+            raise TypeError(f'`design` must be an ActuatorDesign, got {type(design).__name__}')
+        if pressure_model not in PRESSURE_MODELS:
+            raise ValueError(f'`pressure_model` must be one of {sorted(PRESSURE_MODELS)}, '
+                             f'got {pressure_model!r}')
+        if isinstance(n_segments, bool) or not isinstance(n_segments, (int, np.integer)) \
+                or n_segments < 1:
+            raise ValueError(f'`n_segments` must be an integer >= 1, got {n_segments!r}')
+        for name, value in (('samples_per_segment', samples_per_segment),
+                            ('max_iterations', max_iterations)):
+            if not isinstance(value, (int, np.integer)) or value < 2:
+                raise ValueError(f'`{name}` must be an integer >= 2, got {value!r}')
+        self.design = design
+        self.pressure_model = pressure_model
+        self.pressure_coefficient = PRESSURE_MODELS[pressure_model]
+        length = design.free_length
+        self.load_points = tuple(_finite('load_points', s, '[m]') for s in load_points)
+        for s in self.load_points:
+            if not 0.0 < s <= length:
+                raise ValueError(f'`load_points` must lie in (0, {length}] [m], got {s}')
+        if segment_edges is None:
+            edges = uniform_edges(length, int(n_segments), self.load_points)
+        else:
+            edges = np.asarray(segment_edges, dtype=float)
+        self.segments = build_segments(design, edges)
+        for s in self.load_points:
+            if np.min(np.abs(self.segments.edges - s)) > 1e-12:
+                raise ValueError(f'load point {s} [m] is not a segment edge')
+        self.n_segments = self.segments.n
+        self.samples_per_segment = int(samples_per_segment)
+        self.max_iterations = int(max_iterations)
+        self.gtol = float(gtol)
+        self.xtol = float(xtol)
+        # Axial stiffness of the stiffest segment [J]: the scale of gradients in q.
+        self.gradient_scale = float(self.segments.stiffness[:, 0, 0].max())
+        self._params = (design.prestrain, design.emc_coefficients)
+
+    # -- energy -----------------------------------------------------------
+    def _total_energy(self, q, pressure, loads):
+        work = self.pressure_coefficient * pressure
+        energy = segment_energy(q, self.segments, *self._params, work).sum()
+        return energy + load_energy(q, self.segments.lengths, loads)
+
+    def _derivatives(self, q, pressure, loads):
+        """Energy, gradient (N, 4) and Hessian: (N, 4, 4) blocks or dense (4N, 4N)."""
+        work = self.pressure_coefficient * pressure
+        energy, grad, hess = segment_derivatives(q, self.segments, *self._params, work)
+        energy = energy.sum()
+        if not loads:
+            return energy, grad, hess
+        e_load, g_load, h_load = load_derivatives(q, self.segments.lengths, loads)
+        n = q.shape[0]
+        idx = np.arange(n)
+        dense = h_load.reshape(n, 4, n, 4)
+        dense[idx, :, idx, :] += hess
+        return energy + e_load, grad + g_load, dense.reshape(4 * n, 4 * n)
+
+    def _loads(self, tip_force, point_loads):
+        """Convert the tip force and (s, fx, fz) point loads to (node index, force) pairs."""
+        loads = []
+        f0 = _finite('tip_force[0]', tip_force[0], '[N]')
+        p0 = _finite('tip_force[1]', tip_force[1], '[N]')
+        if f0 or p0:
+            loads.append((self.n_segments, np.array([f0, p0])))
+        for item in point_loads:
+            if len(item) != 3:
+                raise ValueError(f'`point_loads` items must be (s [m], fx [N], fz [N]), '
+                                 f'got {item!r}')
+            s, fx, fz = (_finite('point_loads', v, '[m, N]') for v in item)
+            node = int(np.argmin(np.abs(self.segments.edges - s)))
+            if abs(self.segments.edges[node] - s) > 1e-12 or node == 0:
+                raise ValueError(f'point load at s = {s} [m] needs a segment edge there; '
+                                 'pass it in `load_points` when building the solver')
+            if fx or fz:
+                loads.append((node, np.array([fx, fz])))
+        return loads
+
+    # -- Newton -------------------------------------------------------------
+    def _newton_step(self, grad, hess):
+        """
+        Newton step, and whether the Hessian is positive definite.
+
+        Where it is not, the eigenvalues are mirrored (|lambda|) so that the
+        step still descends; the sign of the smallest one is reported.
+        """
+        try:
+            np.linalg.cholesky(hess)
+            if hess.ndim == 3:
+                return -np.linalg.solve(hess, grad[:, :, None])[:, :, 0], 1.0
+            return -np.linalg.solve(hess, grad.ravel()).reshape(grad.shape), 1.0
+        except np.linalg.LinAlgError:
+            pass
+        if hess.ndim == 3:
+            lam, vec = np.linalg.eigh(hess)
+            min_eig = float(lam.min())
+            lam = np.maximum(np.abs(lam), 1e-8 * np.abs(lam).max(axis=1, keepdims=True))
+            coef = np.matmul(grad[:, None, :], vec)[:, 0, :] / lam
+            return -np.matmul(vec, coef[:, :, None])[:, :, 0], min_eig
+        lam, vec = eigh(hess, check_finite=False)
+        min_eig = float(lam.min())
+        lam = np.maximum(np.abs(lam), 1e-8 * np.abs(lam).max())
+        return -(vec @ ((vec.T @ grad.ravel()) / lam)).reshape(grad.shape), min_eig
+
+    def _newton(self, q, pressure, loads):
+        """Damped Newton from q; returns (q, status, iterations, grad, step, min_eig)."""
+        scale = self.gradient_scale
+        step_norm = math.inf
+        grad_rel = math.inf
+        energy, grad, hess = self._derivatives(q, pressure, loads)
+        for iteration in range(1, self.max_iterations + 1):
+            grad_rel = float(np.abs(grad).max()) / scale
+            if not (math.isfinite(energy) and math.isfinite(grad_rel)):
+                return q, SolverStatus.NOT_FINITE, iteration, grad_rel, step_norm, math.nan
+            step, min_eig = self._newton_step(grad, hess)
+            step_norm = float(np.abs(step).max())
+            if grad_rel <= self.gtol and step_norm <= self.xtol:
+                status = SolverStatus.SUCCESS if min_eig > 0.0 else SolverStatus.UNSTABLE
+                return q + step, status, iteration, grad_rel, step_norm, min_eig
+            if step_norm > _MAX_STEP:
+                step *= _MAX_STEP / step_norm
+            slope = float(np.vdot(grad, step))
+            if not slope < 0.0:
+                step, slope = -grad / scale, -float(np.vdot(grad, grad)) / scale
+            trial = q + step
+            e_trial, g_trial, h_trial = self._derivatives(trial, pressure, loads)
+            # Near the solution the energy change is below round-off: take full steps.
+            if e_trial <= energy + _ARMIJO * slope or -slope <= 1e-13 * (abs(energy) + scale):
+                q, energy, grad, hess = trial, e_trial, g_trial, h_trial
+                step_norm = float(np.abs(step).max())
+                continue
+            alpha = 0.5
+            while True:
+                trial = q + alpha * step
+                e_trial = self._total_energy(trial, pressure, loads)
+                if e_trial <= energy + _ARMIJO * alpha * slope:
+                    break
+                alpha *= 0.5
+                if alpha < 1e-10:
+                    return q, SolverStatus.LINE_SEARCH_FAILED, iteration, grad_rel, \
+                        step_norm, min_eig
+            q = trial
+            step_norm = alpha * float(np.abs(step).max())
+            energy, grad, hess = self._derivatives(q, pressure, loads)
+        return q, SolverStatus.MAX_ITERATIONS, self.max_iterations, grad_rel, step_norm, \
+            math.nan
+
+    def _initial_state(self, initial):
+        n = self.n_segments
+        if initial is None:
+            return np.zeros((n, 4)), None
+        if isinstance(initial, CCMResult):
+            if initial.solver is not self and not np.array_equal(
+                    initial.solver.segments.edges, self.segments.edges):
+                raise ValueError('`initial` result comes from a different segmentation; '
+                                 f'expected {n} segments with the same edges')
+            return initial.q.copy(), initial
+        arr = np.asarray(initial, dtype=float)
+        if arr.shape != (n, 4):
+            raise ValueError(f'`initial` must be a CCMResult or an ({n}, 4) array of '
+                             f'(b1, b3, c1, d) in SI, got shape {arr.shape}')
+        if not np.all(np.isfinite(arr)):
+            raise ValueError('`initial` must be finite')
+        return to_scaled(arr, self.segments.lengths), None
+
+    def solve(self, pressure=0.0, tip_force=(0.0, 0.0), initial=None, point_loads=()):
+        """
+        Find the equilibrium at a gauge pressure and tip load.
+
+        Parameters
+        ----------
+        pressure : float
+            Gauge pressure P >= 0 [Pa].
+        tip_force : (float, float)
+            (f0, p0), tip force along global X and Z [N].
+        initial : CCMResult or array_like (N, 4), optional
+            Warm start; a result also seeds continuation from its own loading.
+            None starts from the flat state.
+        point_loads : sequence of (s, fx, fz)
+            Extra loads at intermediate arc lengths s that are segment edges [m, N, N].
+
+        Returns
+        -------
+        CCMResult
+            `success` False (with a message) when Newton and continuation both fail;
+            the state returned is then the last iterate and must not be used as truth.
+
+        Raises
+        ------
+        ValueError, TypeError
+            On non-finite or negative pressure, malformed loads or initial state.
+
+        References
+        ----------
+        Zhou, Headings, Dapino (2022), eq. (21).
+
+        """
+        pressure = _finite('pressure', pressure, '[Pa]')
+        if pressure < 0.0:
+            raise ValueError(f'`pressure` must be >= 0 (gauge) [Pa], got {pressure}')
+        if np.shape(tip_force) != (2,):
+            raise ValueError(f'`tip_force` must be (f0, p0) [N], got {tip_force!r}')
+        loads = self._loads(tip_force, point_loads)
+        q0, seed = self._initial_state(initial)
+        q, status, its, grad, step, min_eig = self._newton(q0, pressure, loads)
+        if status is SolverStatus.SUCCESS or status is SolverStatus.UNSTABLE:
+            return CCMResult(self, q, status, its, grad, step, pressure, loads, tip_force,
+                             min_eig)
+        return self._continuation(q0, seed, pressure, loads, tip_force, its)
+
+    def _continuation(self, q0, seed, pressure, loads, tip_force, spent):
+        """March pressure and loads from the seed's loading (or zero) to the target."""
+        if seed is not None:
+            p_start, loads_start = seed.pressure, seed.point_loads
+            q = q0
+        else:
+            p_start, loads_start = 0.0, []
+            q, status, its, *_ = self._newton(q0, 0.0, [])
+            spent += its
+            if status is not SolverStatus.SUCCESS:
+                return CCMResult(self, q, SolverStatus.CONTINUATION_FAILED, spent, math.inf,
+                                 math.inf, pressure, loads, tip_force, fraction=0.0)
+
+        def loading(lam):
+            mixed = [(n, lam * f) for n, f in loads]
+            mixed += [(n, (1.0 - lam) * f) for n, f in loads_start]
+            return p_start + lam * (pressure - p_start), mixed
+
+        lam, dlam = 0.0, 0.25
+        while lam < 1.0:
+            target = min(1.0, lam + dlam)
+            p, mixed = loading(target)
+            q_new, status, its, grad, step, min_eig = self._newton(q, p, mixed)
+            spent += its
+            if status is SolverStatus.SUCCESS:
+                q, lam = q_new, target
+                dlam = min(2.0 * dlam, 1.0)
+                if lam >= 1.0:
+                    return CCMResult(self, q, status, spent, grad, step, pressure, loads,
+                                     tip_force, min_eig)
+            else:
+                dlam *= 0.5
+                if dlam < 1.0 / 256:
+                    return CCMResult(self, q, SolverStatus.CONTINUATION_FAILED, spent, grad,
+                                     step, pressure, loads, tip_force, fraction=lam)
+        raise AssertionError('unreachable')  # pragma: no cover
+
+    # -- rigidity -----------------------------------------------------------
+    def rigidity(self, pressure=0.0, axis='x', displacement=0.010, initial=None):
+        """
+        Flexural rigidity at fixed pressure by displacement control, eq. (22).
+
+        Solves the unloaded state, then the tip force along +X (or +Z) whose
+        loaded equilibrium moves the tip by `displacement` along that axis,
+        by Newton on the bordered (Lagrange-multiplier) system.
+
+        Parameters
+        ----------
+        pressure : float
+            Gauge pressure [Pa].
+        axis : {'x', 'z'}
+            Load and displacement direction.
+        displacement : float
+            Tip displacement delta > 0 [m].
+        initial : CCMResult or array_like, optional
+            Warm start of the unloaded solve.
+
+        Returns
+        -------
+        RigidityResult
+            K_x = f0 |Z_tip|^3 / (3 delta) or K_z = p0 |X_tip|^3 / (3 delta), levers
+            in the loaded state [N m^2].
+
+        """
+        if axis not in ('x', 'z'):
+            raise ValueError(f"`axis` must be 'x' or 'z', got {axis!r}")
+        delta = _finite('displacement', displacement, '[m]')
+        if delta <= 0.0:
+            raise ValueError(f'`displacement` must be > 0 [m], got {delta}')
+        unloaded = self.solve(pressure, (0.0, 0.0), initial=initial)
+        k = 0 if axis == 'x' else 1
+        direction = np.eye(2)[k]
+        if not unloaded.success:
+            return RigidityResult(axis, delta, math.nan, math.nan, False,
+                                  'unloaded solve failed: ' + unloaded.message, unloaded,
+                                  None, unloaded.iterations)
+        q, force = unloaded.q.copy(), 0.0
+        start = unloaded.tip[k]
+        done, iterations, reached = 0.0, unloaded.iterations, 0.0
+        increment = 1.0
+        while done < 1.0:
+            goal = min(1.0, done + increment)
+            q_new, f_new, ok, its = self._bordered_newton(q, force, pressure, direction,
+                                                          start + goal * delta)
+            iterations += its
+            if ok:
+                q, force, done = q_new, f_new, goal
+                reached = goal
+                increment = min(1.0, 2.0 * increment)
+            else:
+                increment *= 0.5
+                if increment < 1.0 / 64:
+                    loaded = CCMResult(self, q, SolverStatus.CONTINUATION_FAILED, iterations,
+                                       math.inf, math.inf, pressure,
+                                       [(self.n_segments, force * direction)],
+                                       tuple(force * direction), fraction=reached)
+                    return RigidityResult(axis, delta, force, math.nan, False,
+                                          f'displacement control stalled at {reached:.1%} '
+                                          'of the displacement', unloaded, loaded, iterations)
+        loads = [(self.n_segments, force * direction)]
+        _, grad, hess = self._derivatives(q, pressure, loads)
+        try:
+            np.linalg.cholesky(hess)
+            stable = True
+        except np.linalg.LinAlgError:
+            stable = False
+        loaded = CCMResult(self, q, SolverStatus.SUCCESS, iterations,
+                           float(np.abs(grad).max()) / self.gradient_scale, 0.0, pressure,
+                           loads, tuple(force * direction))
+        lever = abs(loaded.tip[1 - k])
+        message = 'converged' + ('' if stable else
+                                 ' (loaded state is unstable under force control)')
+        return RigidityResult(axis, delta, force, lever, True, message, unloaded, loaded,
+                              iterations)
+
+    def _bordered_newton(self, q, force, pressure, direction, target):
+        """Solve grad Pi_int - f grad(e . tip) = 0, e . tip = target, for (q, f)."""
+        n = self.n_segments
+        tip_node = self.n_segments
+        scale = self.gradient_scale
+        for iteration in range(1, self.max_iterations + 1):
+            _, g_int, h_int = self._derivatives(q, pressure, [])
+            _, g_dir, h_dir = load_derivatives(q, self.segments.lengths,
+                                               [(tip_node, direction)])
+            h = force * h_dir
+            idx = np.arange(n)
+            h.reshape(n, 4, n, 4)[idx, :, idx, :] += h_int
+            residual = (g_int + force * g_dir).ravel()
+            nodes, _, _ = node_positions(q, self.segments.lengths)
+            gap = float(direction @ nodes[-1]) - target
+            kkt = np.zeros((4 * n + 1, 4 * n + 1))
+            kkt[:-1, :-1] = h
+            kkt[:-1, -1] = kkt[-1, :-1] = g_dir.ravel()
+            rhs = -np.concatenate([residual, [gap]])
+            # The constraint row is -grad(e . tip) = g_dir, so the gap enters with a minus.
+            rhs[-1] = gap
+            try:
+                sol = np.linalg.solve(kkt, rhs)
+            except np.linalg.LinAlgError:
+                return q, force, False, iteration
+            dq = sol[:-1].reshape(n, 4)
+            step = float(np.abs(dq).max())
+            if not np.all(np.isfinite(sol)):
+                return q, force, False, iteration
+            if step > _MAX_STEP:
+                return q, force, False, iteration
+            q = q + dq
+            force = force + sol[-1]
+            if (float(np.abs(residual).max()) / scale <= self.gtol and step <= self.xtol
+                    and abs(gap) <= 1e-12 * max(abs(target), 1e-3)):
+                return q, force, True, iteration
+        return q, force, False, self.max_iterations
