@@ -1,9 +1,10 @@
 """Total potential of the CCM and its exact gradient and Hessian, vectorised over segments."""
 
+import functools
+
 import numpy as np
 
 from .kinematics import end_rotation, rotation_sum
-from .materials import emc_energy_density, emc_stress, emc_stress_derivative
 
 __all__ = ['segment_energy', 'segment_derivatives', 'load_energy', 'load_derivatives']
 
@@ -18,6 +19,24 @@ def _strain_state(q, seg, prestrain):
     strain = np.matmul(seg.pemc_basis, y[:, :3, None])[:, :, 0]
     strain += prestrain
     return y, strain
+
+
+_POWERS = np.arange(6)
+# Columns of the PEMC products (1, phi_a, phi_a phi_b) take F, sigma and sigma' in turn.
+_PRODUCT_LAW = np.array([0, 1, 1, 1, 2, 2, 2, 2, 2, 2])
+_SYM3 = np.array([[4, 5, 6], [5, 7, 8], [6, 8, 9]])
+
+
+@functools.lru_cache(maxsize=16)
+def _law_matrix(emc):
+    """Map strain powers s^0..s^5 to (F, sigma, sigma') of the PEMC law, shape (6, 3)."""
+    a1, a2, a3, a4 = emc
+    return np.array([[0.0, 0.0, a4],
+                     [0.0, a4, 2.0 * a3],
+                     [a4 / 2.0, a3, 3.0 * a2],
+                     [a3 / 3.0, a2, 4.0 * a1],
+                     [a2 / 4.0, a1, 0.0],
+                     [a1 / 5.0, 0.0, 0.0]])
 
 
 def segment_energy(q, seg, prestrain, emc, pressure_work):
@@ -49,7 +68,8 @@ def segment_energy(q, seg, prestrain, emc, pressure_work):
     """
     y, strain = _strain_state(q, seg, prestrain)
     ky = np.matmul(seg.stiffness, y[:, :, None])[:, :, 0]
-    pemc = (seg.pemc_weights * emc_energy_density(emc, strain)).sum(axis=1)
+    density = np.matmul(strain[:, :, None] ** _POWERS, _law_matrix(emc)[:, 0])
+    pemc = (seg.pemc_weights * density).sum(axis=1)
     # Pi_P = -c (1 + C)(V0 + g . y3): the gas volume is bilinear in (y3, C).
     volume = (1.0 + y[:, 3]) * (seg.gas_volume + (seg.gas_moments * y[:, :3]).sum(axis=1))
     return 0.5 * (y * ky).sum(axis=1) + pemc - pressure_work * volume
@@ -71,33 +91,26 @@ def segment_derivatives(q, seg, prestrain, emc, pressure_work):
     y, strain = _strain_state(q, seg, prestrain)
     k = seg.stiffness
     ky = np.matmul(k, y[:, :, None])[:, :, 0]
-    basis, weights = seg.pemc_basis, seg.pemc_weights
-    wsig = weights * emc_stress(emc, strain)
-    wtan = weights * emc_stress_derivative(emc, strain)
-    basis_t = seg.pemc_basis_t
-
-    g_y = ky.copy()
-    g_y[:, :3] += np.matmul(basis_t, wsig[:, :, None])[:, :, 0]
-    h_y = k.copy()
-    h_y[:, :3, :3] += np.matmul(basis_t * wtan[:, None, :], basis)
+    # F, sigma and sigma' at every point at once, then all PEMC integrals in one sum.
+    law = np.matmul(strain[:, :, None] ** _POWERS, _law_matrix(emc))
+    pemc = (law[:, :, _PRODUCT_LAW] * seg.pemc_products).sum(axis=1)
 
     gas = seg.gas_moments
     c1 = y[:, 3]
     lin_gas = seg.gas_volume + (gas * y[:, :3]).sum(axis=1)
-    energy = (0.5 * (y * ky).sum(axis=1) + (weights * emc_energy_density(emc, strain)).sum(1)
-              - pressure_work * (1.0 + c1) * lin_gas)
-    g_y[:, :3] -= pressure_work * (1.0 + c1)[:, None] * gas
+    energy = 0.5 * (y * ky).sum(axis=1) + pemc[:, 0] - pressure_work * (1.0 + c1) * lin_gas
+
+    g_y = ky
+    g_y[:, :3] += pemc[:, 1:4] - pressure_work * (1.0 + c1)[:, None] * gas
     g_y[:, 3] -= pressure_work * lin_gas
+    h_y = k.copy()
+    h_y[:, :3, :3] += pemc[:, _SYM3]
     h_y[:, :3, 3] -= pressure_work * gas
     h_y[:, 3, :3] -= pressure_work * gas
 
     # Chain rule y(q): A = q0, B' = 3 q1 + 2 q3^2, D' = q3, C = q2.
-    jac = np.zeros((q.shape[0], 4, 4))
-    jac[:, 0, 0] = 1.0
-    jac[:, 1, 1] = 3.0
+    jac = np.array(seg.chain_jacobian)
     jac[:, 1, 3] = 4.0 * q[:, 3]
-    jac[:, 2, 3] = 1.0
-    jac[:, 3, 2] = 1.0
     grad = np.matmul(g_y[:, None, :], jac)[:, 0, :]
     hess = np.matmul(jac.transpose(0, 2, 1), np.matmul(h_y, jac))
     hess[:, 3, 3] += 4.0 * g_y[:, 1]
@@ -132,22 +145,24 @@ def load_energy(q, lengths, loads):
     return total
 
 
+# beta = atan2(b, a) with a = 1 + q0 + 3 q1 and b = 2 q3: the constant da/dq, db/dq.
+_DA = np.array([1.0, 3.0, 0.0, 0.0])
+_DB = np.array([0.0, 0.0, 0.0, 2.0])
+_DADB = np.stack([_DA, _DB])
+# Second-derivative patterns: da da^T - db db^T and da db^T + db da^T.
+_OUTER_DIFF = np.outer(_DA, _DA) - np.outer(_DB, _DB)
+_OUTER_MIX = np.outer(_DA, _DB) + np.outer(_DB, _DA)
+
+
 def _beta_derivatives(q):
     """First and second derivatives of beta_i in q_i, shapes (N, 4) and (N, 4, 4)."""
     a = 1.0 + q[:, 0] + 3.0 * q[:, 1]
     b = 2.0 * q[:, 3]
     r2 = a * a + b * b
-    da = np.array([1.0, 3.0, 0.0, 0.0])
-    db = np.array([0.0, 0.0, 0.0, 2.0])
-    beta_a, beta_b = -b / r2, a / r2
-    grad = beta_a[:, None] * da + beta_b[:, None] * db
+    grad = np.stack([-b / r2, a / r2], axis=1) @ _DADB
     r4 = r2 * r2
-    haa, hbb, hab = 2.0 * a * b / r4, -2.0 * a * b / r4, (b * b - a * a) / r4
-    outer_aa = np.outer(da, da)
-    outer_bb = np.outer(db, db)
-    outer_ab = np.outer(da, db) + np.outer(db, da)
-    hess = (haa[:, None, None] * outer_aa + hbb[:, None, None] * outer_bb
-            + hab[:, None, None] * outer_ab)
+    hess = ((2.0 * a * b / r4)[:, None, None] * _OUTER_DIFF
+            + ((b * b - a * a) / r4)[:, None, None] * _OUTER_MIX)
     return grad, hess
 
 

@@ -1,6 +1,7 @@
 """Exact integration data of every segment: signed layer boxes reduced to moment matrices."""
 
 from dataclasses import dataclass
+import functools
 
 import numpy as np
 
@@ -40,6 +41,9 @@ class SegmentData:
         (1, xi^2, z') at the PEMC quadrature points.
     pemc_weights : ndarray, shape (N, P)
         Quadrature weights times the PEMC width [m^3].
+    pemc_products : ndarray, shape (N, P, 10)
+        Weights times (1, phi_a, phi_a phi_b for a <= b), the integrands of the
+        PEMC energy, gradient and Hessian at each point [m^3].
 
     """
 
@@ -50,11 +54,22 @@ class SegmentData:
     gas_moments: np.ndarray
     pemc_basis: np.ndarray
     pemc_weights: np.ndarray
+    pemc_products: np.ndarray
 
     @property
     def pemc_basis_t(self):
         """The PEMC basis transposed, shape (N, 3, P)."""
         return self.pemc_basis.transpose(0, 2, 1)
+
+    @functools.cached_property
+    def chain_jacobian(self):
+        """d(A, B', D', C)/dq at q3 = 0, shape (N, 4, 4); dB'/dq3 = 4 q3 is set per call."""
+        jac = np.zeros((self.n, 4, 4))
+        jac[:, 0, 0] = 1.0
+        jac[:, 1, 1] = 3.0
+        jac[:, 2, 3] = 1.0
+        jac[:, 3, 2] = 1.0
+        return jac
 
     @property
     def n(self):
@@ -212,6 +227,12 @@ def build_segments(design, edges):
     basis[:, :, 2] = -2.0 * z_pts[None, :] / lens[:, None]
     weights = width * lens[:, None] * w_pts[None, :]
 
+    pairs = [(a, b) for a in range(3) for b in range(a, 3)]
+    products = np.concatenate(
+        [np.ones_like(weights)[:, :, None], basis,
+         np.stack([basis[:, :, a] * basis[:, :, b] for a, b in pairs], axis=2)], axis=2)
+    products *= weights[:, :, None]
+
     return SegmentData(edges=edges, lengths=lens, stiffness=stiffness,
                        gas_volume=gas_moments[:, 0].copy(), gas_moments=gas_moments,
-                       pemc_basis=basis, pemc_weights=weights)
+                       pemc_basis=basis, pemc_weights=weights, pemc_products=products)

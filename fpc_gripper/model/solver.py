@@ -569,14 +569,14 @@ class CCMSolver:
         scale = self.gradient_scale
         for iteration in range(1, self.max_iterations + 1):
             _, g_int, h_int = self._derivatives(q, pressure, [])
-            _, g_dir, h_dir = load_derivatives(q, self.segments.lengths,
-                                               [(tip_node, direction)])
+            e_dir, g_dir, h_dir = load_derivatives(q, self.segments.lengths,
+                                                   [(tip_node, direction)])
             h = force * h_dir
             idx = np.arange(n)
             h.reshape(n, 4, n, 4)[idx, :, idx, :] += h_int
             residual = (g_int + force * g_dir).ravel()
-            nodes, _, _ = node_positions(q, self.segments.lengths)
-            gap = float(direction @ nodes[-1]) - target
+            # The potential of a unit load along e is -e . tip.
+            gap = -e_dir - target
             kkt = np.zeros((4 * n + 1, 4 * n + 1))
             kkt[:-1, :-1] = h
             kkt[:-1, -1] = kkt[-1, :-1] = g_dir.ravel()
