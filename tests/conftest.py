@@ -4,20 +4,26 @@ import os
 import pathlib
 import sys
 
+import pytest
+
 _ROOT = pathlib.Path(__file__).resolve().parents[1]
 
 
-def _ensure_isolated():
+@pytest.hookimpl(tryfirst=True)
+def pytest_configure(config):
     """Re-exec pytest under scripts/isolated so DDS can never leave the machine."""
     if os.environ.get('FPC_NETNS') == '1':
         return
-    argv = [str(_ROOT / 'scripts' / 'isolated'), sys.executable, '-m', 'pytest', *sys.argv[1:]]
+    capture = config.pluginmanager.getplugin('capturemanager')
+    if capture is not None:
+        # The exec'd run must write to the real terminal, not pytest's capture files.
+        capture.stop_global_capturing()
+    argv = [str(_ROOT / 'scripts' / 'isolated'), sys.executable, '-m', 'pytest',
+            *config.invocation_params.args]
     sys.stdout.flush()
     sys.stderr.flush()
+    os.chdir(config.invocation_params.dir)
     os.execv(argv[0], argv)
-
-
-_ensure_isolated()
 
 
 def pytest_report_header(config):
