@@ -1,0 +1,441 @@
+"""A Modbus TCP pressure-regulator backend configured by a YAML register map."""
+
+import dataclasses
+import inspect
+import math
+import pathlib
+import time
+import typing
+
+import yaml
+
+from fpc_gripper.regulators.base import BackendFault
+from fpc_gripper.regulators.base import BackendStatus
+from fpc_gripper.regulators.base import check_channel
+from fpc_gripper.regulators.base import check_pressure
+
+REGISTER_TYPES = ('holding', 'input')
+
+_TOP_KEYS = ('connection', 'scaling', 'noise_std_pa', 'channels')
+_CONNECTION_KEYS = ('host', 'port', 'device_id', 'unit', 'timeout_s')
+_CHANNEL_KEYS = ('name', 'setpoint', 'readback', 'scaling')
+_REGISTER_KEYS = ('address', 'type')
+_SCALING_KEYS = ('counts_per_pa', 'full_scale_counts', 'full_scale_pa', 'offset_counts',
+                 'signed')
+
+
+@dataclasses.dataclass(frozen=True)
+class Register:
+    """
+    One 16-bit register.
+
+    Attributes
+    ----------
+    address : int
+        Zero-based protocol address, 0..65535.
+    kind : {'holding', 'input'}
+        Register table.
+    """
+
+    address: int
+    kind: str = 'holding'
+
+
+@dataclasses.dataclass(frozen=True)
+class Scaling:
+    """
+    Linear map between register counts and gauge pressure.
+
+    counts = offset_counts + counts_per_pa · pressure [Pa gauge], rounded and
+    limited to [min_counts, max_counts].
+
+    Attributes
+    ----------
+    counts_per_pa : float
+        Gain [count/Pa], > 0.
+    offset_counts : float
+        Counts at 0 Pa gauge.
+    min_counts, max_counts : int
+        Representable range (the device's full scale, or the 16-bit range).
+    signed : bool
+        True when registers hold two's-complement int16.
+    """
+
+    counts_per_pa: float
+    offset_counts: float = 0.0
+    min_counts: int = 0
+    max_counts: int = 0xFFFF
+    signed: bool = False
+
+    def to_counts(self, pressure_pa_gauge):
+        """Return the register word for a pressure [Pa gauge], saturated to the range."""
+        counts = round(self.offset_counts + self.counts_per_pa * float(pressure_pa_gauge))
+        counts = min(max(counts, self.min_counts), self.max_counts)
+        return counts & 0xFFFF
+
+    def to_pressure(self, word):
+        """Return the pressure [Pa gauge] of a raw 16-bit register word."""
+        counts = int(word)
+        if self.signed and counts >= 0x8000:
+            counts -= 0x10000
+        return (counts - self.offset_counts) / self.counts_per_pa
+
+    @property
+    def resolution_pa(self):
+        """Pressure of one count [Pa]."""
+        return 1.0 / self.counts_per_pa
+
+
+@dataclasses.dataclass(frozen=True)
+class ChannelMap:
+    """Setpoint register, readback register and scaling of one channel."""
+
+    setpoint: Register
+    readback: Register
+    scaling: Scaling
+    name: str = ''
+
+
+@dataclasses.dataclass(frozen=True)
+class RegisterMap:
+    """
+    Connection settings and per-channel registers of a Modbus TCP regulator.
+
+    Attributes
+    ----------
+    channels : tuple of ChannelMap
+        One entry per channel, in channel order.
+    host : str
+        Device address.
+    port : int
+        TCP port.
+    device_id : int
+        Modbus unit / device id, 0..255.
+    timeout_s : float
+        Request timeout [s].
+    noise_std_pa : float
+        Standard deviation of the readback noise [Pa], for the reported variance.
+    """
+
+    channels: typing.Tuple[ChannelMap, ...]
+    host: str = '127.0.0.1'
+    port: int = 502
+    device_id: int = 1
+    timeout_s: float = 0.5
+    noise_std_pa: float = 0.0
+
+    @classmethod
+    def from_yaml(cls, path):
+        """
+        Load a register map from YAML (see ``msg_configs/modbus_example.yaml``).
+
+        Raises
+        ------
+        ValueError
+            If the file is not valid YAML or a key is unknown, missing or out of
+            range; the message names the file and the key.
+        """
+        path = pathlib.Path(path)
+        try:
+            text = path.read_text(encoding='utf-8')
+        except OSError as exc:
+            raise ValueError(f'`path` cannot be read: {path}: {exc}') from exc
+        try:
+            data = yaml.safe_load(text)
+        except yaml.YAMLError as exc:
+            raise ValueError(f'{path}: not valid YAML: {exc}') from exc
+        return cls.from_dict(data, source=str(path))
+
+    @classmethod
+    def from_dict(cls, data, source='<dict>'):
+        """Build a register map from the parsed YAML structure (see :meth:`from_yaml`)."""
+        where = f' (in {source})'
+        top = _mapping(data, 'the document', where)
+        _known(top, _TOP_KEYS, 'the top level', where)
+        conn = _mapping(top.get('connection', {}), 'connection', where)
+        _known(conn, _CONNECTION_KEYS, 'connection', where)
+        if 'device_id' in conn and 'unit' in conn:
+            raise ValueError(f"connection: give 'device_id' or its alias 'unit', not both{where}")
+        host = conn.get('host', '127.0.0.1')
+        if not isinstance(host, str) or not host:
+            raise ValueError(f'connection.host must be a non-empty string, got {host!r}{where}')
+        port = _integer(conn.get('port', 502), 'connection.port', 1, 65535, where)
+        device_key = 'unit' if 'unit' in conn else 'device_id'
+        device_id = _integer(conn.get(device_key, 1), f'connection.{device_key}', 0, 255, where)
+        timeout = _number(conn.get('timeout_s', 0.5), 'connection.timeout_s', where, '[s]')
+        if timeout <= 0.0:
+            raise ValueError(f'connection.timeout_s must be > 0 [s], got {timeout}{where}')
+        noise = _number(top.get('noise_std_pa', 0.0), 'noise_std_pa', where, '[Pa]')
+        if noise < 0.0:
+            raise ValueError(f'noise_std_pa must be >= 0 [Pa], got {noise}{where}')
+        default_scaling = top.get('scaling')
+        channels = top.get('channels')
+        if not isinstance(channels, list) or not channels:
+            raise ValueError(f'channels must be a non-empty list, got {channels!r}{where}')
+        parsed = []
+        for i, entry in enumerate(channels):
+            key = f'channels[{i}]'
+            entry = _mapping(entry, key, where)
+            _known(entry, _CHANNEL_KEYS, key, where)
+            for required in ('setpoint', 'readback'):
+                if required not in entry:
+                    raise ValueError(f'{key}.{required} is missing{where}')
+            setpoint = _register(entry['setpoint'], f'{key}.setpoint', where)
+            if setpoint.kind != 'holding':
+                raise ValueError(f"{key}.setpoint.type must be 'holding' (input registers are "
+                                 f'read-only), got {setpoint.kind!r}{where}')
+            readback = _register(entry['readback'], f'{key}.readback', where)
+            raw_scaling = entry.get('scaling', default_scaling)
+            if raw_scaling is None:
+                raise ValueError(f'{key}.scaling is missing and there is no top-level '
+                                 f'scaling{where}')
+            scale_key = f'{key}.scaling' if 'scaling' in entry else 'scaling'
+            scaling = _scaling(raw_scaling, scale_key, where)
+            name = entry.get('name', f'channel_{i}')
+            parsed.append(ChannelMap(setpoint=setpoint, readback=readback, scaling=scaling,
+                                     name=str(name)))
+        return cls(channels=tuple(parsed), host=host, port=port, device_id=device_id,
+                   timeout_s=timeout, noise_std_pa=noise)
+
+
+class ModbusRegulator:
+    """
+    A pressure regulator reached over Modbus TCP (pymodbus 3.x, imported in :meth:`connect`).
+
+    Parameters
+    ----------
+    register_map : RegisterMap or str or pathlib.Path
+        The map, or a YAML file to load it from.
+    host, port, device_id, timeout_s : optional
+        Override the connection settings of the map.
+    reconnect_interval_s : float
+        Least time between two reconnection attempts after a failure [s].
+    clock : callable
+        Returns the current time [s], for the reconnection interval.
+    """
+
+    def __init__(self, register_map, host=None, port=None, device_id=None, timeout_s=None,
+                 reconnect_interval_s=1.0, clock=time.monotonic):
+        if not isinstance(register_map, RegisterMap):
+            register_map = RegisterMap.from_yaml(register_map)
+        overrides = {}
+        if host is not None:
+            if not isinstance(host, str) or not host:
+                raise ValueError(f'`host` must be a non-empty string, got {host!r}')
+            overrides['host'] = host
+        if port is not None:
+            overrides['port'] = _integer(port, '`port`', 1, 65535, '')
+        if device_id is not None:
+            overrides['device_id'] = _integer(device_id, '`device_id`', 0, 255, '')
+        if timeout_s is not None:
+            if not float(timeout_s) > 0.0:
+                raise ValueError(f'`timeout_s` must be > 0 [s], got {timeout_s!r}')
+            overrides['timeout_s'] = float(timeout_s)
+        if not float(reconnect_interval_s) >= 0.0:
+            raise ValueError(
+                f'`reconnect_interval_s` must be >= 0 [s], got {reconnect_interval_s!r}')
+        self.register_map = dataclasses.replace(register_map, **overrides)
+        self.n_channels = len(self.register_map.channels)
+        self._reconnect_interval = float(reconnect_interval_s)
+        self._clock = clock
+        self._client = None
+        self._exceptions = (OSError,)
+        self._device_kw = 'device_id'
+        self._fault = None
+        self._last_attempt = None
+
+    def connect(self):
+        """
+        Open the TCP connection; a no-op while connected.
+
+        Raises
+        ------
+        BackendFault
+            If pymodbus is missing or the device cannot be reached.
+        """
+        if self._client is None:
+            try:
+                from pymodbus.client import ModbusTcpClient
+                from pymodbus.exceptions import ModbusException
+            except ImportError as exc:
+                raise self._failed(
+                    f'pymodbus >= 3 is required for the Modbus backend: {exc}') from exc
+            rmap = self.register_map
+            self._client = ModbusTcpClient(rmap.host, port=rmap.port, timeout=rmap.timeout_s,
+                                           retries=0)
+            self._exceptions = (ModbusException, OSError)
+            params = inspect.signature(self._client.read_holding_registers).parameters
+            # pymodbus < 3.9 names the unit id `slave`.
+            self._device_kw = 'device_id' if 'device_id' in params else 'slave'
+        self._last_attempt = self._clock()
+        if not self._client.connected:
+            if not self._client.connect():
+                rmap = self.register_map
+                raise self._failed(f'cannot connect to {rmap.host}:{rmap.port}')
+        self._fault = None
+
+    def close(self):
+        """Close the connection; safe to call more than once."""
+        if self._client is not None:
+            self._client.close()
+            self._client = None
+
+    def set_pressure(self, channel, pressure_pa_gauge):
+        """
+        Write the setpoint register of one channel.
+
+        Parameters
+        ----------
+        channel : int
+            Channel index.
+        pressure_pa_gauge : float
+            Setpoint [Pa gauge], saturated to the register's range.
+
+        Raises
+        ------
+        BackendFault
+            On a connection error or an exception response.
+        """
+        index = check_channel(channel, self.n_channels)
+        value = check_pressure(pressure_pa_gauge)
+        cmap = self.register_map.channels[index]
+        word = cmap.scaling.to_counts(value)
+        self._request('write_register', cmap.setpoint.address, word)
+
+    def read_pressure(self, channel):
+        """
+        Read the readback register of one channel.
+
+        Returns
+        -------
+        value : float
+            Pressure [Pa gauge].
+        variance : float
+            noise_std_pa² + resolution²/12 [Pa²].
+
+        Raises
+        ------
+        BackendFault
+            On a connection error or an exception response.
+        """
+        index = check_channel(channel, self.n_channels)
+        cmap = self.register_map.channels[index]
+        method = ('read_holding_registers' if cmap.readback.kind == 'holding'
+                  else 'read_input_registers')
+        response = self._request(method, cmap.readback.address, count=1)
+        variance = self.register_map.noise_std_pa ** 2 + cmap.scaling.resolution_pa ** 2 / 12.0
+        return cmap.scaling.to_pressure(response.registers[0]), variance
+
+    def status(self):
+        """Return the connection state and the last error, without any traffic."""
+        connected = self._client is not None and self._client.connected
+        fault = self._fault
+        if fault is None and not connected:
+            fault = 'not connected'
+        return BackendStatus(ok=fault is None, fault=fault, connected=connected,
+                             n_channels=self.n_channels)
+
+    def _request(self, method, address, *args, **kwargs):
+        if self._client is None:
+            raise BackendFault('Modbus regulator not connected: call connect() first')
+        if not self._client.connected:
+            now = self._clock()
+            if self._last_attempt is not None and \
+                    now - self._last_attempt < self._reconnect_interval:
+                raise BackendFault(self._fault or 'Modbus connection lost')
+            self.connect()
+        kwargs[self._device_kw] = self.register_map.device_id
+        try:
+            response = getattr(self._client, method)(address, *args, **kwargs)
+        except self._exceptions as exc:
+            self._client.close()
+            raise self._failed(f'{method}({address}) failed: {exc}') from exc
+        if response.isError():
+            raise self._failed(f'{method}({address}) returned an exception response: '
+                               f'{response}')
+        self._fault = None
+        return response
+
+    def _failed(self, message):
+        self._fault = message
+        return BackendFault(message)
+
+
+def _mapping(value, key, where):
+    if not isinstance(value, dict):
+        raise ValueError(f'{key} must be a mapping, got {type(value).__name__}{where}')
+    return value
+
+
+def _known(mapping, allowed, key, where):
+    unknown = sorted(str(k) for k in mapping if k not in allowed)
+    if unknown:
+        raise ValueError(f'unknown key(s) {unknown} in {key}; allowed: {list(allowed)}{where}')
+
+
+def _number(value, key, where, unit):
+    if isinstance(value, str):
+        # YAML 1.1 (PyYAML) reads '1.0e6' (no sign in the exponent) as a string.
+        try:
+            value = float(value)
+        except ValueError:
+            pass
+    if isinstance(value, bool) or not isinstance(value, (int, float)) \
+            or not math.isfinite(value):
+        raise ValueError(f'{key} must be a finite number {unit}, got {value!r}{where}')
+    return float(value)
+
+
+def _integer(value, key, low, high, where):
+    if isinstance(value, bool) or not hasattr(value, '__index__') \
+            or not low <= int(value) <= high:
+        raise ValueError(f'{key} must be an integer in [{low}, {high}], got {value!r}{where}')
+    return int(value)
+
+
+def _register(value, key, where):
+    entry = _mapping(value, key, where)
+    _known(entry, _REGISTER_KEYS, key, where)
+    if 'address' not in entry:
+        raise ValueError(f'{key}.address is missing{where}')
+    address = _integer(entry['address'], f'{key}.address', 0, 0xFFFF, where)
+    kind = entry.get('type', 'holding')
+    if kind not in REGISTER_TYPES:
+        raise ValueError(f'{key}.type must be one of {list(REGISTER_TYPES)}, got {kind!r}{where}')
+    return Register(address=address, kind=kind)
+
+
+def _scaling(value, key, where):
+    entry = _mapping(value, key, where)
+    _known(entry, _SCALING_KEYS, key, where)
+    signed = entry.get('signed', False)
+    if not isinstance(signed, bool):
+        raise ValueError(f'{key}.signed must be true or false, got {signed!r}{where}')
+    low, high = (-0x8000, 0x7FFF) if signed else (0, 0xFFFF)
+    offset = _number(entry.get('offset_counts', 0), f'{key}.offset_counts', where, '[count]')
+    if not low <= offset <= high:
+        raise ValueError(f'{key}.offset_counts must be in [{low}, {high}], got {offset}{where}')
+    has_gain = 'counts_per_pa' in entry
+    has_full_scale = 'full_scale_counts' in entry or 'full_scale_pa' in entry
+    if has_gain == has_full_scale:
+        raise ValueError(f"{key} needs either 'counts_per_pa' or both 'full_scale_counts' and "
+                         f"'full_scale_pa', got keys {sorted(entry)}{where}")
+    if has_gain:
+        gain = _number(entry['counts_per_pa'], f'{key}.counts_per_pa', where, '[count/Pa]')
+        if gain <= 0.0:
+            raise ValueError(f'{key}.counts_per_pa must be > 0 [count/Pa], got {gain}{where}')
+        return Scaling(counts_per_pa=gain, offset_counts=offset, min_counts=low,
+                       max_counts=high, signed=signed)
+    for required in ('full_scale_counts', 'full_scale_pa'):
+        if required not in entry:
+            raise ValueError(f'{key}.{required} is missing (full-scale scaling needs both '
+                             f"'full_scale_counts' and 'full_scale_pa'){where}")
+    counts = _integer(entry['full_scale_counts'], f'{key}.full_scale_counts', low, high, where)
+    span = _number(entry['full_scale_pa'], f'{key}.full_scale_pa', where, '[Pa]')
+    if span <= 0.0:
+        raise ValueError(f'{key}.full_scale_pa must be > 0 [Pa], got {span}{where}')
+    if counts <= offset:
+        raise ValueError(f'{key}.full_scale_counts must be > offset_counts ({offset}), '
+                         f'got {counts}{where}')
+    return Scaling(counts_per_pa=(counts - offset) / span, offset_counts=offset,
+                   min_counts=int(math.ceil(offset)), max_counts=counts, signed=signed)
