@@ -6,6 +6,7 @@ import pathlib
 import re
 
 from fpc_gripper.model import ActuatorDesign
+from fpc_gripper.model.design import safe_load_yaml
 
 __all__ = ['FingerConfig', 'GripperConfig', 'load_gripper_config',
            'default_gripper_config_path', 'config_dir']
@@ -119,7 +120,7 @@ def load_gripper_config(path=None):
     path = pathlib.Path(path) if path is not None else default_gripper_config_path()
     source = str(path)
     try:
-        data = yaml.safe_load(path.read_text())
+        data = safe_load_yaml(path.read_text())
     except OSError as exc:
         raise ValueError(f'{source}: cannot read gripper config: {exc}') from exc
     except yaml.YAMLError as exc:
@@ -129,8 +130,10 @@ def load_gripper_config(path=None):
     unknown = sorted(set(map(str, data)) - _TOP_KEYS)
     if unknown:
         raise ValueError(f'{source}: unknown key(s): {", ".join(unknown)}')
-    actuator = data.get('actuator', 'actuator_paper.yaml')
-    if isinstance(actuator, str):
+    actuator = data.get('actuator')
+    if actuator is None:
+        base = ActuatorDesign.paper().to_dict()
+    elif isinstance(actuator, str):
         actuator_path = (path.parent / actuator)
         base = ActuatorDesign.from_yaml(actuator_path).to_dict()
     elif isinstance(actuator, dict):

@@ -9,7 +9,7 @@ import numpy as np
 
 from .materials import check_emc_monotonic, default_emc_coefficients, Material
 
-__all__ = ['ActuatorDesign', 'PAPER_MATERIALS']
+__all__ = ['ActuatorDesign', 'PAPER_MATERIALS', 'safe_load_yaml']
 
 #: Table III laminae: constraining layer, fluidic layer, regular (and prestressed) EMC.
 PAPER_MATERIALS = {
@@ -22,6 +22,31 @@ _LENGTHS = ('Lx', 'Ly', 'Lc', 'Cx', 'Cy', 'H', 'h1', 'h2', 'h3', 'h3a', 'h3b', '
 _MATERIAL_FIELDS = ('constraining_layer', 'fluidic_layer', 'emc')
 #: Strain headroom above the prestrain on which the PEMC law must be monotonic [-].
 _MONOTONIC_MARGIN = 0.2
+
+
+def safe_load_yaml(text):
+    """
+    Parse YAML safely, reading 1e6-style numbers as floats (YAML 1.2) as users expect.
+
+    PyYAML follows YAML 1.1, where ``263e6`` (no dot, no exponent sign) is a string.
+    """
+    import re
+
+    import yaml
+
+    class _Loader(yaml.SafeLoader):
+        pass
+
+    _Loader.add_implicit_resolver(
+        'tag:yaml.org,2002:float',
+        re.compile(r'^[-+]?(?:[0-9][0-9_]*(?:\.[0-9_]*)?|\.[0-9_]+)(?:[eE][-+]?[0-9]+)?$'
+                   r'|^[-+]?\.(?:inf|Inf|INF)$|^\.(?:nan|NaN|NAN)$'),
+        list('-+0123456789.'))
+    # Integers keep their own resolver, registered first for the same characters.
+    _Loader.yaml_implicit_resolvers = {
+        key: sorted(value, key=lambda item: item[0] != 'tag:yaml.org,2002:int')
+        for key, value in _Loader.yaml_implicit_resolvers.items()}
+    return yaml.load(text, Loader=_Loader)
 
 
 def _real(name, value, unit):
@@ -232,7 +257,9 @@ class ActuatorDesign:
         import yaml
         path = pathlib.Path(path)
         try:
-            data = yaml.safe_load(path.read_text())
+            data = safe_load_yaml(path.read_text())
+        except OSError as exc:
+            raise ValueError(f'{path}: cannot read design: {exc}') from exc
         except yaml.YAMLError as exc:
             raise ValueError(f'{path}: malformed YAML: {exc}') from exc
         return cls.from_dict(data, source=str(path))

@@ -111,3 +111,10 @@ def test_fit_emc_polynomial_rejects_bad_data():
         fit_emc_polynomial(s, np.where(s > 0.2, np.nan, s))
     with pytest.raises(ValueError, match='increases'):
         fit_emc_polynomial(s, -1e6 * s)
+
+
+def test_yaml_reads_exponent_numbers_as_floats(tmp_path):
+    path = tmp_path / 'e.yaml'
+    path.write_text('constraining_layer: {E1: 263e6, E2: 263e6, nu: 0.43}\nLy: 3.175e-2\n')
+    d = ActuatorDesign.from_yaml(path)
+    assert d.constraining_layer.E1 == 263e6 and d.Ly == 0.03175
