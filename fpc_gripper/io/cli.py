@@ -1,0 +1,607 @@
+"""The ``fpc-mcap`` command: inspect, plot, export, recover and replay gripper recordings."""
+
+import argparse
+import csv
+import dataclasses
+import json
+import math
+import os
+import pathlib
+import re
+import shutil
+import sys
+import time
+
+from .mcap_reader import McapFile, McapInputError, recover, UnknownTopicError
+from .mcap_writer import atomic_output, Rosbag2McapWriter, SchemaNotFoundError
+from .messages import (curvature_message, DEFAULT_ATMOSPHERIC_PRESSURE, finger_topic,
+                       gauge_pressure, MODEL_OUTPUT_TYPES, rigidity_message, serialized_shape,
+                       time_to_ns, tip_force_from_wrench)
+
+__all__ = ['ReplayReport', 'build_parser', 'export_csv', 'file_info', 'main', 'replay_model']
+
+_INPUT_TOPIC = re.compile(
+    r'^(?P<ns>(?:.*/)?)(?P<finger>finger_\d+)/(?P<kind>pressure_command|pressure|tip_force)$')
+# Model outputs are reliable, depth 10, volatile (docs/CONVENTIONS.md).
+_INFINITE = {'sec': 9223372036, 'nsec': 854775807}
+_MODEL_OUTPUT_QOS = [{
+    'history': 'keep_last', 'depth': 10, 'reliability': 'reliable', 'durability': 'volatile',
+    'deadline': _INFINITE, 'lifespan': _INFINITE, 'liveliness': 'automatic',
+    'liveliness_lease_duration': _INFINITE, 'avoid_ros_namespace_conventions': False}]
+
+
+# -- info ---------------------------------------------------------------------------------
+
+def file_info(mcap_file):
+    """
+    Summarise a recording: topics, counts, duration and rates.
+
+    Parameters
+    ----------
+    mcap_file : McapFile
+        The recording.
+
+    Returns
+    -------
+    dict
+        ``path, profile, library, message_count, chunk_count, compression, start_ns,
+        end_ns, duration_s, topics`` (each topic: ``type, count, rate_hz``, the rate over
+        that topic's own first-to-last span [Hz]).
+
+    """
+    spans = {}
+    for msg in mcap_file.messages(decode=False):
+        first, _ = spans.get(msg.topic, (msg.log_time, msg.log_time))
+        spans[msg.topic] = (first, msg.log_time)
+    topics = {}
+    for name, info in sorted(mcap_file.topics.items()):
+        first, last = spans.get(name, (0, 0))
+        span = (last - first) * 1e-9
+        rate = (info.message_count - 1) / span if info.message_count > 1 and span > 0 else 0.0
+        topics[name] = {'type': info.type_name or '(no schema)', 'count': info.message_count,
+                        'rate_hz': rate}
+    return {
+        'path': str(mcap_file.path),
+        'profile': mcap_file.header.profile,
+        'library': mcap_file.header.library,
+        'message_count': mcap_file.message_count,
+        'chunk_count': mcap_file.chunk_count,
+        'compression': sorted(c or 'none' for c in mcap_file.compressions),
+        'start_ns': mcap_file.start_time,
+        'end_ns': mcap_file.end_time,
+        'duration_s': (mcap_file.end_time - mcap_file.start_time) * 1e-9,
+        'topics': topics,
+    }
+
+
+def _print_info(info, out):
+    print(f"file:      {info['path']}", file=out)
+    print(f"profile:   {info['profile'] or '(none)'}  library: {info['library']}", file=out)
+    print(f"messages:  {info['message_count']} in {info['chunk_count']} chunks "
+          f"({', '.join(info['compression']) or 'no chunks'})", file=out)
+    print(f"start:     {info['start_ns'] * 1e-9:.9f} s", file=out)
+    print(f"duration:  {info['duration_s']:.3f} s", file=out)
+    print('topics:', file=out)
+    width = max((len(t) for t in info['topics']), default=0)
+    for name, topic in info['topics'].items():
+        print(f"  {name:<{width}}  {topic['type']:<36} {topic['count']:>8} msgs "
+              f"{topic['rate_hz']:>9.2f} Hz", file=out)
+
+
+# -- export-csv ---------------------------------------------------------------------------
+
+def _plain(value):
+    if isinstance(value, (bytes, bytearray)):
+        return list(value)
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    if hasattr(value, '__slots__') and not isinstance(value, (str, int, float, bool)):
+        return {name: _plain(getattr(value, name)) for name in value.__slots__}
+    if hasattr(value, 'tolist'):
+        return value.tolist()
+    return value
+
+
+def _flatten(value, prefix, row):
+    if hasattr(value, '__slots__') and not isinstance(value, (str, int, float, bool)):
+        for name in value.__slots__:
+            _flatten(getattr(value, name), f'{prefix}.{name}' if prefix else name, row)
+    elif isinstance(value, (list, tuple, bytes, bytearray)) or hasattr(value, 'tolist'):
+        row[prefix] = json.dumps(_plain(value))
+    else:
+        row[prefix] = value
+    return row
+
+
+def _csv_name(topic):
+    return (topic.strip('/').replace('/', '__') or 'root') + '.csv'
+
+
+def export_csv(mcap_file, out_dir, topics=None):
+    """
+    Write one CSV per topic: times, then every field flattened with dotted names.
+
+    Scalars get a column each; arrays and sequences (a Path's poses, for instance) go into
+    one JSON-encoded column. Files are written in a temporary directory beside `out_dir`
+    and moved into place only after the whole file was read.
+
+    Parameters
+    ----------
+    mcap_file : McapFile
+        The recording.
+    out_dir : pathlib.Path
+        Output directory (created if missing).
+    topics : list of str, optional
+        Topics to export (all when omitted).
+
+    Returns
+    -------
+    dict of str to pathlib.Path
+        Topic to CSV file.
+
+    """
+    topics = sorted(mcap_file.topics) if not topics else list(topics)
+    mcap_file.check_topics(topics)
+    mcap_file.check_decodable(topics)
+    out_dir = pathlib.Path(out_dir)
+    if out_dir.exists() and not out_dir.is_dir():
+        raise McapInputError(f'{out_dir}: exists and is not a directory')
+    parent = out_dir.parent
+    if not parent.is_dir():
+        raise McapInputError(f'{parent}: no such directory')
+    tmp_dir = parent / f'.{out_dir.name}.{os.getpid()}.tmp'
+    shutil.rmtree(tmp_dir, ignore_errors=True)
+    tmp_dir.mkdir()
+    try:
+        writers, files = {}, {}
+        for msg in mcap_file.messages(topics=topics):
+            row = _flatten(msg.ros_msg, '', {'log_time_ns': msg.log_time,
+                                             'publish_time_ns': msg.publish_time})
+            writer = writers.get(msg.topic)
+            if writer is None:
+                files[msg.topic] = open(tmp_dir / _csv_name(msg.topic), 'w', newline='',
+                                        encoding='utf-8')
+                writer = csv.DictWriter(files[msg.topic], fieldnames=list(row))
+                writer.writeheader()
+                writers[msg.topic] = writer
+            writer.writerow(row)
+        for handle in files.values():
+            handle.close()
+        for topic in topics:
+            if topic not in files:
+                empty = tmp_dir / _csv_name(topic)
+                empty.write_text('log_time_ns,publish_time_ns\n', encoding='utf-8')
+        if not out_dir.exists():
+            os.replace(tmp_dir, out_dir)
+        else:
+            for topic in topics:
+                os.replace(tmp_dir / _csv_name(topic), out_dir / _csv_name(topic))
+        return {topic: out_dir / _csv_name(topic) for topic in topics}
+    finally:
+        shutil.rmtree(tmp_dir, ignore_errors=True)
+
+
+# -- replay-model -------------------------------------------------------------------------
+
+@dataclasses.dataclass
+class ReplayReport:
+    """
+    Counts of a `replay_model` run.
+
+    Attributes
+    ----------
+    inputs : int
+        Input messages read.
+    solves : int
+        Equilibria written.
+    failures : int
+        Solves that did not converge (nothing written for them).
+    clipped : int
+        Inputs below atmospheric pressure, solved at 0 Pa gauge.
+    rigidity_solves : int
+        Rigidity evaluations (one per distinct pressure and axis).
+    fingers : list of str
+        Finger topic prefixes replayed.
+    outputs : dict of str to int
+        Messages written per topic.
+
+    """
+
+    inputs: int = 0
+    solves: int = 0
+    failures: int = 0
+    clipped: int = 0
+    rigidity_solves: int = 0
+    fingers: list = dataclasses.field(default_factory=list)
+    outputs: dict = dataclasses.field(default_factory=dict)
+
+
+class _Finger:
+    """Replay state of one finger."""
+
+    def __init__(self, prefix, name, solver, pressure_topic, force_topic):
+        self.prefix = prefix
+        self.name = name
+        self.solver = solver
+        self.pressure_topic = pressure_topic
+        self.force_topic = force_topic
+        self.pressure = None
+        self.force = (0.0, 0.0)
+        self.last = None
+        self.rigidity = {}
+        self.last_rigidity = None
+        self.last_rigidity_time = None
+
+
+def _load_config(config_path):
+    try:
+        from .config import default_gripper_config_path, load_gripper_config
+    except ImportError as err:
+        raise McapInputError(f'gripper configuration loader unavailable ({err})') from None
+    path = config_path or default_gripper_config_path()
+    return load_gripper_config(path)
+
+
+def _select_inputs(mcap_file, source):
+    fingers = {}
+    for topic in mcap_file.topics:
+        match = _INPUT_TOPIC.match(topic)
+        if match:
+            key = (match['ns'], match['finger'])
+            fingers.setdefault(key, {})[match['kind']] = topic
+    if not fingers:
+        raise UnknownTopicError(
+            f'{mcap_file.path}: no finger_<i>/pressure_command, pressure or tip_force topic; '
+            f'the file has {", ".join(sorted(mcap_file.topics)) or "no topics"}')
+    chosen = {}
+    for key, kinds in sorted(fingers.items()):
+        order = {'auto': ('pressure', 'pressure_command'), 'pressure': ('pressure',),
+                 'pressure_command': ('pressure_command',)}[source]
+        pressure = next((kinds[k] for k in order if k in kinds), None)
+        if pressure is not None:
+            chosen[key] = (pressure, kinds.get('tip_force'))
+    if not chosen:
+        raise UnknownTopicError(
+            f'{mcap_file.path}: no finger has a {source.replace("auto", "pressure")} topic '
+            f'(found {", ".join(sorted(t for k in fingers.values() for t in k.values()))})')
+    return chosen
+
+
+def _progress_printer(stream, every_s=1.0):
+    state = {'last': time.monotonic()}
+
+    def show(done, total, final=False):
+        now = time.monotonic()
+        if final or now - state['last'] >= every_s:
+            state['last'] = now
+            percent = 100.0 * done / total if total else 100.0
+            print(f'replay-model: {done}/{total} inputs ({percent:.0f} %)', file=stream,
+                  flush=True)
+    return show
+
+
+def replay_model(in_path, out_path, *, config=None, n_segments=8, pressure_model='adiabatic',
+                 source='auto', rigidity=True, rigidity_period=0.0, copy_inputs=False,
+                 compression='zstd', progress=None):
+    """
+    Run the CCM core over recorded pressure and tip-force messages; write its outputs.
+
+    Every ``finger_<i>/pressure`` (or ``pressure_command``) message, and every
+    ``finger_<i>/tip_force`` message once a pressure is known, triggers one solve with
+    the latest pressure (absolute minus the configuration's atmospheric pressure, clipped
+    at 0) and tip force (f0 = force.x, p0 = force.z), warm-started from that finger's last
+    converged result. Each converged solve writes ``shape``, ``curvature`` and
+    ``rigidity`` under the input's namespace, with the input's log time and its header
+    stamp. K_x and K_z are solved cold once per distinct pressure (at most once per
+    `rigidity_period` of log time per finger when that is > 0).
+
+    Parameters
+    ----------
+    in_path, out_path : str or os.PathLike
+        Input recording and output file (written to a temporary file, then moved).
+    config : str or os.PathLike, optional
+        Gripper configuration (default: the package's default configuration).
+    n_segments : int
+        CCM segments.
+    pressure_model : {'adiabatic', 'isobaric'}
+        Pressure work model.
+    source : {'auto', 'pressure', 'pressure_command'}
+        Which pressure topic to replay; ``auto`` prefers the measured ``pressure``.
+    rigidity : bool
+        Solve the rigidities (else the rigidity messages carry NaN).
+    rigidity_period : float
+        Reuse a finger's last rigidities for this long [s]; 0 solves for every new
+        pressure.
+    copy_inputs : bool
+        Also copy the replayed input messages into the output.
+    compression : {'zstd', 'lz4', 'none'}
+        Chunk compression of the output.
+    progress : callable, optional
+        ``progress(done, total, final=False)``, called after each input message.
+
+    Returns
+    -------
+    ReplayReport
+
+    """
+    from rclpy.serialization import serialize_message
+
+    from ..model import CCMSolver
+
+    if not (math.isfinite(rigidity_period) and rigidity_period >= 0.0):
+        raise ValueError(f'`rigidity_period` must be >= 0 [s], got {rigidity_period}')
+    gripper = _load_config(config)
+    designs = {f.name: f.design for f in gripper.fingers}
+    atmospheric = float(getattr(gripper, 'atmospheric_pressure', DEFAULT_ATMOSPHERIC_PRESSURE))
+    report = ReplayReport()
+    with McapFile(in_path) as mcap_file:
+        chosen = _select_inputs(mcap_file, source)
+        unknown = sorted({name for _, name in chosen} - set(designs))
+        if unknown:
+            raise UnknownTopicError(
+                f'{mcap_file.path}: finger(s) {", ".join(unknown)} not in the gripper '
+                f'configuration (which has {", ".join(sorted(designs))})')
+        solvers = {}
+        by_topic = {}
+        fingers = []
+        for (prefix, name), (pressure_topic, force_topic) in chosen.items():
+            if name not in solvers:
+                solvers[name] = CCMSolver(designs[name], n_segments=n_segments,
+                                          pressure_model=pressure_model)
+            finger = _Finger(prefix, name, solvers[name], pressure_topic, force_topic)
+            fingers.append(finger)
+            by_topic[pressure_topic] = finger
+            if force_topic:
+                by_topic[force_topic] = finger
+        inputs = sorted(by_topic)
+        mcap_file.check_decodable(inputs)
+        total = sum(mcap_file.topics[t].message_count for t in inputs)
+        report.fingers = [f.prefix + f.name for f in fingers]
+        with atomic_output(out_path, suffix='.mcap') as tmp:
+            writer = Rosbag2McapWriter(tmp, compression=compression, overwrite=True,
+                                       library='fpc-mcap replay-model (mcap-python)')
+            try:
+                if copy_inputs:
+                    for topic in inputs:
+                        schema = next(s for s in mcap_file.summary.schemas.values()
+                                      if s.name == mcap_file.topics[topic].type_name)
+                        writer.add_topic(
+                            topic, schema.name, definition=schema.data.decode(),
+                            offered_qos_profiles=mcap_file.topics[topic].offered_qos_profiles)
+                for f in fingers:
+                    for kind, type_name in MODEL_OUTPUT_TYPES.items():
+                        writer.add_topic(f.prefix + finger_topic(f.name, kind), type_name,
+                                         offered_qos_profiles=_MODEL_OUTPUT_QOS)
+                for msg in mcap_file.messages(topics=inputs):
+                    report.inputs += 1
+                    if copy_inputs:
+                        writer.write(msg.topic, msg.data, msg.log_time, msg.publish_time)
+                    _replay_one(by_topic[msg.topic], msg, atmospheric,
+                                float(rigidity_period) if rigidity else None, writer,
+                                serialize_message, report)
+                    if progress is not None:
+                        progress(report.inputs, total)
+            finally:
+                writer.close()
+        if progress is not None:
+            progress(report.inputs, total, final=True)
+    report.outputs = dict(sorted(report.outputs.items()))
+    return report
+
+
+def _replay_one(finger, msg, atmospheric, rigidity_period, writer, serialize, report):
+    """Solve one input; `rigidity_period` is None (no rigidity) or a period [s]."""
+    stamp = time_to_ns(msg.ros_msg.header.stamp) or msg.log_time
+    if msg.topic == finger.pressure_topic:
+        gauge = gauge_pressure(msg.ros_msg, atmospheric)
+        if gauge < 0.0:
+            report.clipped += 1
+            gauge = 0.0
+        finger.pressure = gauge
+    else:
+        finger.force = tip_force_from_wrench(msg.ros_msg)
+    if finger.pressure is None:
+        return
+    result = finger.solver.solve(finger.pressure, finger.force, initial=finger.last)
+    if not result.success:
+        report.failures += 1
+        return
+    finger.last = result
+    report.solves += 1
+    k = (None, None)
+    if rigidity_period is not None:
+        k = finger.rigidity.get(finger.pressure)
+        recent = (finger.last_rigidity is not None and rigidity_period > 0.0
+                  and msg.log_time - finger.last_rigidity_time < rigidity_period * 1e9)
+        if k is None and recent:
+            k = finger.last_rigidity
+        elif k is None:
+            k = tuple(finger.solver.rigidity(finger.pressure, axis=axis).value
+                      for axis in ('x', 'z'))
+            finger.rigidity[finger.pressure] = k
+            finger.last_rigidity, finger.last_rigidity_time = k, msg.log_time
+            report.rigidity_solves += 2
+    outputs = {
+        'shape': serialized_shape(result, finger.name, stamp),
+        'curvature': serialize(curvature_message(result)),
+        'rigidity': serialize(rigidity_message(k[0], k[1], finger.name, stamp)),
+    }
+    for kind, data in outputs.items():
+        topic = finger.prefix + finger_topic(finger.name, kind)
+        writer.write(topic, data, msg.log_time, stamp)
+        report.outputs[topic] = report.outputs.get(topic, 0) + 1
+
+
+# -- command line -------------------------------------------------------------------------
+
+def _times(text):
+    try:
+        values = [float(v) for v in text.replace(',', ' ').split()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'--times must be numbers in seconds, got {text!r}')
+    if not values or not all(math.isfinite(v) for v in values):
+        raise argparse.ArgumentTypeError(f'--times must be finite seconds, got {text!r}')
+    return values
+
+
+def _size(text):
+    match = re.fullmatch(r'(\d+)[xX](\d+)', text.strip())
+    if not match:
+        raise argparse.ArgumentTypeError(f'--size must be WIDTHxHEIGHT in pixels, got {text!r}')
+    return int(match[1]), int(match[2])
+
+
+def build_parser():
+    """Build the argparse parser of ``fpc-mcap``."""
+    parser = argparse.ArgumentParser(
+        prog='fpc-mcap',
+        description='Inspect, plot, export, recover and replay fpc_gripper MCAP recordings '
+                    '(rosbag2 form: profile ros2, cdr messages, ros2msg schemas).')
+    sub = parser.add_subparsers(dest='command', required=True, metavar='COMMAND')
+
+    p = sub.add_parser('info', help='topics, message counts, duration and rates',
+                       description='Print the topics, message counts, duration and rates of '
+                                   'a complete MCAP file.')
+    p.add_argument('input', type=pathlib.Path, metavar='IN', help='MCAP file')
+    p.add_argument('--json', action='store_true', help='print JSON instead of a table')
+
+    p = sub.add_parser('plot', help='PNG plots of curvature, pressure and finger shapes',
+                       description='Write curvature.png and pressure.png (against time from '
+                                   'the first message) and shapes.png (finger shapes '
+                                   'overlaid at --times) into OUTDIR.')
+    p.add_argument('input', type=pathlib.Path, metavar='IN', help='MCAP file')
+    p.add_argument('output', type=pathlib.Path, metavar='OUTDIR',
+                   help='output directory (created if missing)')
+    p.add_argument('--times', type=_times, default=None,
+                   help='comma-separated shape times from the first message [s] '
+                        '(default: five evenly spaced)')
+    p.add_argument('--size', type=_size, default=(1280, 720),
+                   help='image size WIDTHxHEIGHT [px] (default 1280x720)')
+    p.add_argument('--dpi', type=int, default=100, help='resolution [px/inch] (default 100)')
+    p.add_argument('--atmospheric-pressure', type=float, default=DEFAULT_ATMOSPHERIC_PRESSURE,
+                   help='subtracted from absolute pressure readings [Pa] (default 101325)')
+
+    p = sub.add_parser('export-csv', help='one CSV per topic',
+                       description='Write one CSV per topic into OUTDIR: log and publish '
+                                   'times [ns], then every field (arrays as JSON).')
+    p.add_argument('input', type=pathlib.Path, metavar='IN', help='MCAP file')
+    p.add_argument('output', type=pathlib.Path, metavar='OUTDIR',
+                   help='output directory (created if missing)')
+    p.add_argument('--topics', nargs='+', default=None, metavar='TOPIC',
+                   help='topics to export (default: all)')
+
+    p = sub.add_parser('recover', help='rebuild a truncated file (e.g. after kill -9)',
+                       description='Copy every readable message of a truncated or damaged '
+                                   'MCAP file into a complete, indexed one.')
+    p.add_argument('input', type=pathlib.Path, metavar='IN', help='damaged MCAP file')
+    p.add_argument('output', type=pathlib.Path, metavar='OUT', help='recovered MCAP file')
+    p.add_argument('--compression', choices=('zstd', 'lz4', 'none'), default='zstd',
+                   help='chunk compression of OUT (default zstd)')
+
+    p = sub.add_parser('replay-model', help='run the CCM model on recorded pressures',
+                       description='Solve the CCM model for every recorded finger_<i>/pressure '
+                                   '(or pressure_command) and tip_force message, warm-started, '
+                                   'and write finger_<i>/shape, curvature and rigidity to OUT.')
+    p.add_argument('input', type=pathlib.Path, metavar='IN', help='MCAP file')
+    p.add_argument('output', type=pathlib.Path, metavar='OUT', help='output MCAP file')
+    p.add_argument('--config', type=pathlib.Path, default=None,
+                   help='gripper configuration YAML (default: the package default)')
+    p.add_argument('--segments', type=int, default=8, help='CCM segments (default 8)')
+    p.add_argument('--pressure-model', choices=('adiabatic', 'isobaric'), default='adiabatic',
+                   help='pressure work model (default adiabatic)')
+    p.add_argument('--source', choices=('auto', 'pressure', 'pressure_command'),
+                   default='auto', help='pressure topic to replay (default: measured '
+                                        'pressure if recorded, else pressure_command)')
+    p.add_argument('--no-rigidity', action='store_true',
+                   help='skip the rigidity solves (rigidity messages carry NaN)')
+    p.add_argument('--rigidity-period', type=float, default=0.0, metavar='S',
+                   help='reuse the last K_x, K_z of a finger for S seconds of log time '
+                        '(default 0: solve for every new pressure)')
+    p.add_argument('--copy-inputs', action='store_true',
+                   help='also copy the replayed input messages into OUT')
+    p.add_argument('--compression', choices=('zstd', 'lz4', 'none'), default='zstd',
+                   help='chunk compression of OUT (default zstd)')
+    p.add_argument('--quiet', action='store_true', help='no progress on stderr')
+    return parser
+
+
+def _run(args, out, err):
+    if args.command == 'info':
+        with McapFile(args.input) as f:
+            info = file_info(f)
+        if args.json:
+            print(json.dumps(info, indent=2), file=out)
+        else:
+            _print_info(info, out)
+    elif args.command == 'plot':
+        from .plots import make_plots
+        if args.output.exists() and not args.output.is_dir():
+            raise McapInputError(f'{args.output}: exists and is not a directory')
+        with McapFile(args.input) as f:
+            created = not args.output.exists()
+            args.output.mkdir(parents=True, exist_ok=True)
+            try:
+                written = make_plots(f, args.output, times=args.times, size=args.size,
+                                     dpi=args.dpi,
+                                     atmospheric_pressure=args.atmospheric_pressure)
+            except BaseException:
+                if created:
+                    shutil.rmtree(args.output, ignore_errors=True)
+                raise
+        for path in written:
+            print(path, file=out)
+    elif args.command == 'export-csv':
+        with McapFile(args.input) as f:
+            written = export_csv(f, args.output, topics=args.topics)
+        for path in written.values():
+            print(path, file=out)
+    elif args.command == 'recover':
+        report = recover(args.input, args.output, compression=args.compression)
+        state = 'complete' if report.complete else f'cut off ({report.dropped_bytes} bytes lost)'
+        print(f'recovered {report.messages} messages from {report.chunks} chunks; input was '
+              f'{state}; {report.corrupt_chunks} damaged chunks skipped, '
+              f'{report.skipped_messages} messages without schema skipped -> {args.output}',
+              file=out)
+    elif args.command == 'replay-model':
+        progress = None if args.quiet else _progress_printer(err)
+        report = replay_model(args.input, args.output, config=args.config,
+                              n_segments=args.segments, pressure_model=args.pressure_model,
+                              source=args.source, rigidity=not args.no_rigidity,
+                              rigidity_period=args.rigidity_period,
+                              copy_inputs=args.copy_inputs, compression=args.compression,
+                              progress=progress)
+        print(f'replayed {report.inputs} inputs of {", ".join(report.fingers)}: '
+              f'{report.solves} solves, {report.failures} not converged, '
+              f'{report.clipped} below atmospheric -> {args.output}', file=out)
+    return 0
+
+
+def main(argv=None):
+    """
+    Run ``fpc-mcap``.
+
+    Parameters
+    ----------
+    argv : list of str, optional
+        Arguments (default ``sys.argv[1:]``).
+
+    Returns
+    -------
+    int
+        0 on success, 1 for bad input (a message on stderr), 2 for bad usage.
+
+    """
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return _run(args, sys.stdout, sys.stderr)
+    except (McapInputError, SchemaNotFoundError, OSError, ValueError) as error:
+        print(f'fpc-mcap {args.command}: error: {error}', file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print(f'fpc-mcap {args.command}: interrupted', file=sys.stderr)
+        return 130
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,306 @@
+"""ROS 2 node that records gripper topics to MCAP in rosbag2's form, crash-safely."""
+
+import functools
+import importlib
+import sys
+import time
+
+from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor, SetParametersResult
+import rclpy
+from rclpy.exceptions import ParameterException
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.serialization import serialize_message
+
+from ..io.mcap_writer import (normalize_type_name, Rosbag2McapWriter, SchemaNotFoundError,
+                              type_description_hash)
+from ..io.messages import gripper_topics, time_to_ns
+
+__all__ = ['McapRecorder', 'main']
+
+_COMPRESSIONS = ('zstd', 'lz4', 'none')
+_DEFAULT_FINGERS = ('finger_0', 'finger_1', 'finger_2')
+# Depth of the recorder's subscriptions: room for bursts while a chunk is compressed.
+_SUBSCRIPTION_DEPTH = 100
+
+
+def _message_class(type_name):
+    package, namespace, name = normalize_type_name(type_name)
+    module = importlib.import_module(f'{package}.{namespace}')
+    return getattr(module, name)
+
+
+def _hash_string(type_hash, type_name):
+    value = bytes(getattr(type_hash, 'value', b'') or b'')
+    version = int(getattr(type_hash, 'version', 0) or 0)
+    if version > 0 and any(value):
+        return f'RIHS{version:02d}_{value.hex()}'
+    return type_description_hash(type_name)
+
+
+def adapt_qos_to_publishers(profiles):
+    """
+    Choose a subscription QoS that connects to every publisher, as rosbag2 does.
+
+    Reliable only if every publisher is reliable, transient-local only if every publisher
+    is; keep-last with a deep queue; deadline and liveliness left unspecified.
+
+    Parameters
+    ----------
+    profiles : sequence of rclpy.qos.QoSProfile
+        Offered profiles of the publishers.
+
+    Returns
+    -------
+    rclpy.qos.QoSProfile
+
+    """
+    reliable = bool(profiles) and all(
+        p.reliability == ReliabilityPolicy.RELIABLE for p in profiles)
+    latched = bool(profiles) and all(
+        p.durability == DurabilityPolicy.TRANSIENT_LOCAL for p in profiles)
+    return QoSProfile(
+        history=HistoryPolicy.KEEP_LAST, depth=_SUBSCRIPTION_DEPTH,
+        reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
+        durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE)
+
+
+class McapRecorder(Node):
+    """
+    Record a list of topics to MCAP, subscribing to each with a QoS its publishers accept.
+
+    Topics without a publisher yet are looked for again every ``discovery_period_s``.
+    Every ``flush_period_s / 2`` the open chunk is closed and written with its index and
+    the file is fsync'ed, so a ``kill -9`` loses at most the last ``flush_period_s`` of
+    messages. Destroying the node (SIGINT, SIGTERM) writes the summary and index.
+    """
+
+    def __init__(self, **kwargs):
+        super().__init__('mcap_recorder', **kwargs)
+        self._writer = None
+        self._subs = {}
+        self._flush_timer = None
+        self._params = {}
+        self._write_errors = 0
+        self.add_on_set_parameters_callback(self._validate_parameters)
+        self.add_post_set_parameters_callback(self._store_parameters)
+        self._declare_parameters()
+        self._wanted = self._topic_list()
+        p = self._params
+        output = p['output_path'] or time.strftime('fpc_gripper_%Y_%m_%d-%H_%M_%S.mcap')
+        self._writer = Rosbag2McapWriter(
+            output, compression=p['compression'],
+            max_file_size=int(p['max_file_size_mb'] * 1024 * 1024),
+            max_duration=int(p['max_duration_s'] * 1e9), overwrite=p['overwrite'],
+            library='fpc_gripper mcap_recorder (mcap-python)')
+        self._restart_flush_timer()
+        self._discovery_timer = self.create_timer(p['discovery_period_s'], self._discover)
+        self._discover()
+        self.get_logger().info(
+            f'recording {len(self._wanted)} topics to {self._writer.path} '
+            f'({p["compression"]}, flush every {p["flush_period_s"]:.3g} s)')
+
+    # -- parameters -----------------------------------------------------------------------
+
+    def _declare_parameters(self):
+        positive = FloatingPointRange(from_value=0.001, to_value=3600.0)
+        non_negative = FloatingPointRange(from_value=0.0, to_value=1.0e9)
+        self.declare_parameter('output_path', '', ParameterDescriptor(
+            description='MCAP file (*.mcap), or a directory for split files '
+                        '(default: fpc_gripper_<date>.mcap in the working directory)',
+            read_only=True))
+        self.declare_parameter('topics', [''], ParameterDescriptor(
+            description='Topics to record, relative to the node namespace; empty for every '
+                        'fpc_gripper input and output of the configured fingers',
+            read_only=True))
+        self.declare_parameter('flush_period_s', 1.0, ParameterDescriptor(
+            description='Longest time a received message waits before it is on disk '
+                        'in a completed chunk [s]', floating_point_range=[positive]))
+        self.declare_parameter('max_file_size_mb', 0.0, ParameterDescriptor(
+            description='Split to a new file at this size [MiB]; 0 never splits',
+            floating_point_range=[non_negative]))
+        self.declare_parameter('max_duration_s', 0.0, ParameterDescriptor(
+            description='Split to a new file after this much recording time [s]; 0 never',
+            floating_point_range=[non_negative]))
+        self.declare_parameter('compression', 'zstd', ParameterDescriptor(
+            description='Chunk compression: zstd, lz4 or none', read_only=True))
+        self.declare_parameter('discovery_period_s', 0.5, ParameterDescriptor(
+            description='Period of the search for publishers of topics not yet recorded [s]',
+            floating_point_range=[positive], read_only=True))
+        self.declare_parameter('gripper_config', '', ParameterDescriptor(
+            description='Gripper configuration YAML whose fingers give the default topics '
+                        '(default: the package default)', read_only=True))
+        self.declare_parameter('overwrite', False, ParameterDescriptor(
+            description='Replace an existing output file', read_only=True))
+
+    def _validate_parameters(self, parameters):
+        for param in parameters:
+            if param.name == 'compression' and param.value not in _COMPRESSIONS:
+                return SetParametersResult(
+                    successful=False,
+                    reason=f'`compression` must be one of {", ".join(_COMPRESSIONS)}, '
+                           f'got {param.value!r}')
+        return SetParametersResult(successful=True)
+
+    def _store_parameters(self, parameters):
+        for param in parameters:
+            value = param.value
+            if param.name == 'topics':
+                value = [t for t in value if t]
+            self._params[param.name] = value
+        if self._writer is not None:
+            self._writer.max_file_size = int(self._params['max_file_size_mb'] * 1024 * 1024)
+            self._writer.max_duration = int(self._params['max_duration_s'] * 1e9)
+            if any(p.name == 'flush_period_s' for p in parameters):
+                self._restart_flush_timer()
+
+    def _topic_list(self):
+        topics = self._params['topics']
+        if not topics:
+            topics = gripper_topics(self._finger_names())
+        resolved = []
+        for topic in topics:
+            name = self.resolve_topic_name(topic)
+            if name not in resolved:
+                resolved.append(name)
+        return resolved
+
+    def _finger_names(self):
+        try:
+            from ..io.config import default_gripper_config_path, load_gripper_config
+            path = self._params['gripper_config'] or default_gripper_config_path()
+            return [f.name for f in load_gripper_config(path).fingers]
+        except (ImportError, OSError, ValueError) as error:
+            self.get_logger().warning(
+                f'gripper configuration unavailable ({error}); recording fingers '
+                f'{", ".join(_DEFAULT_FINGERS)}')
+            return list(_DEFAULT_FINGERS)
+
+    # -- recording ------------------------------------------------------------------------
+
+    def _restart_flush_timer(self):
+        if self._flush_timer is not None:
+            self.destroy_timer(self._flush_timer)
+        # Half the period: a message waits at most one tick plus the timer's jitter.
+        self._flush_timer = self.create_timer(0.5 * self._params['flush_period_s'],
+                                              self._flush)
+
+    def _flush(self):
+        if self._writer is not None and self._writer.pending_count:
+            try:
+                self._writer.flush()
+            except OSError as error:
+                self.get_logger().error(f'flush failed: {error}', throttle_duration_sec=5.0)
+
+    def _discover(self):
+        for topic in self._wanted:
+            infos = self.get_publishers_info_by_topic(topic)
+            if not infos:
+                continue
+            profiles = [info.qos_profile for info in infos]
+            if topic in self._subs:
+                self._adapt_subscription(topic, profiles)
+                continue
+            types = sorted({info.topic_type for info in infos})
+            if len(types) > 1:
+                self.get_logger().warning(
+                    f'{topic} has publishers of several types ({", ".join(types)}); '
+                    'not recorded', throttle_duration_sec=10.0)
+                continue
+            type_name = types[0]
+            try:
+                msg_class = _message_class(type_name)
+                self._writer.add_topic(topic, type_name, offered_qos_profiles=profiles,
+                                       type_hash=_hash_string(infos[0].topic_type_hash,
+                                                              type_name))
+            except (ImportError, AttributeError, ValueError, SchemaNotFoundError) as error:
+                self.get_logger().error(f'cannot record {topic} ({type_name}): {error}',
+                                        throttle_duration_sec=10.0)
+                continue
+            self._subscribe(topic, msg_class, adapt_qos_to_publishers(profiles))
+
+    def _subscribe(self, topic, msg_class, qos):
+        self._subs[topic] = (self.create_subscription(
+            msg_class, topic, functools.partial(self._on_message, topic), qos), msg_class, qos)
+        self.get_logger().info(
+            f'recording {topic} [{self._writer.topics[topic]}] '
+            f'({qos.reliability.name.lower()}, {qos.durability.name.lower()})')
+
+    def _adapt_subscription(self, topic, profiles):
+        """Re-subscribe if a publisher that joined later cannot serve the current QoS."""
+        subscription, msg_class, qos = self._subs[topic]
+        wanted = adapt_qos_to_publishers(profiles)
+        stricter = (
+            (qos.reliability == ReliabilityPolicy.RELIABLE
+             and wanted.reliability != ReliabilityPolicy.RELIABLE)
+            or (qos.durability == DurabilityPolicy.TRANSIENT_LOCAL
+                and wanted.durability != DurabilityPolicy.TRANSIENT_LOCAL))
+        if stricter:
+            self.destroy_subscription(subscription)
+            self._subscribe(topic, msg_class, wanted)
+
+    def _on_message(self, topic, msg):
+        if self._writer is None:
+            return
+        log_time = self.get_clock().now().nanoseconds
+        header = getattr(msg, 'header', None)
+        stamp = getattr(header, 'stamp', None)
+        publish_time = time_to_ns(stamp) if stamp is not None else 0
+        try:
+            self._writer.write(topic, serialize_message(msg), log_time,
+                               publish_time or log_time)
+        except OSError as error:
+            self._write_errors += 1
+            self.get_logger().error(f'write failed ({self._write_errors} lost): {error}',
+                                    throttle_duration_sec=5.0)
+
+    @property
+    def writer(self):
+        """The Rosbag2McapWriter of the recording (for tests and tools)."""
+        return self._writer
+
+    @property
+    def recorded_topics(self):
+        """Topics subscribed so far."""
+        return list(self._subs)
+
+    def close(self):
+        """Write the summary and index and close the file (idempotent)."""
+        if self._writer is not None:
+            writer, self._writer = self._writer, None
+            writer.close()
+            # After SIGINT/SIGTERM the context is shut down and /rosout cannot publish.
+            logger = self.get_logger() if self.context.ok() else \
+                rclpy.logging.get_logger('fpc_gripper.mcap_recorder')
+            logger.info(
+                f'closed {", ".join(str(p) for p in writer.paths)}: '
+                f'{writer.message_count} messages')
+
+    def destroy_node(self):
+        """Close the recording, then destroy the node."""
+        self.close()
+        return super().destroy_node()
+
+
+def main(args=None):
+    """Run the recorder until SIGINT or SIGTERM, then close the file with its index."""
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = McapRecorder()
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except (OSError, ValueError, ParameterException) as error:
+        print(f'mcap_recorder: error: {error}', file=sys.stderr)
+        return 1
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,223 @@
+"""The fpc-mcap command: info, export-csv, plot, recover, and its errors on bad input."""
+
+import csv
+import json
+
+import matplotlib.image
+from mcap.writer import Writer
+from mcap_test_utils import FakeResult, samples
+import pytest
+from rclpy.serialization import serialize_message
+
+from fpc_gripper.io.cli import main
+from fpc_gripper.io.mcap_reader import McapFile
+from fpc_gripper.io.mcap_writer import Rosbag2McapWriter, type_name_of
+from fpc_gripper.io.messages import curvature_message, shape_message
+
+BASE = 1_700_000_000_000_000_000
+TOPICS = ('finger_0/pressure_command', 'finger_0/pressure', 'finger_0/curvature',
+          'finger_0/shape', '/diagnostics')
+
+
+def write_recording(path, n=40, period=50_000_000):
+    """N samples of a few gripper topics at 20 Hz, plus curvature and shape of finger_1."""
+    with Rosbag2McapWriter(path, chunk_size=4096) as writer:
+        for topic in TOPICS:
+            writer.add_topic('/' + topic.lstrip('/'), type_name_of(samples(0)[topic]))
+        writer.add_topic('/finger_1/curvature', 'std_msgs/msg/Float64')
+        writer.add_topic('/finger_1/shape', 'nav_msgs/msg/Path')
+        for i in range(n):
+            t = BASE + i * period
+            sample = samples(i)
+            for topic in TOPICS:
+                writer.write('/' + topic.lstrip('/'), serialize_message(sample[topic]), t + 1)
+            result = FakeResult(10.0 + 0.1 * i)
+            writer.write('/finger_1/curvature', serialize_message(curvature_message(result)), t)
+            writer.write('/finger_1/shape',
+                         serialize_message(shape_message(result, 'finger_1', t)), t)
+    return path
+
+
+@pytest.fixture(scope='module')
+def recording(tmp_path_factory):
+    return write_recording(tmp_path_factory.mktemp('rec') / 'rec.mcap')
+
+
+def run(capsys, *argv):
+    code = main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_help_of_every_command(capsys):
+    for command in ([], ['info'], ['plot'], ['export-csv'], ['recover'], ['replay-model']):
+        with pytest.raises(SystemExit) as exit_info:
+            main(command + ['--help'])
+        assert exit_info.value.code == 0
+        assert 'usage: fpc-mcap' in capsys.readouterr().out
+
+
+def test_info_counts_and_rates(capsys, recording):
+    code, out, err = run(capsys, 'info', recording, '--json')
+    assert code == 0, err
+    info = json.loads(out)
+    assert info['profile'] == 'ros2' and info['message_count'] == 40 * 7
+    assert info['duration_s'] == pytest.approx(39 * 0.05, abs=1e-8)
+    topic = info['topics']['/finger_0/pressure']
+    assert topic['type'] == 'sensor_msgs/msg/FluidPressure' and topic['count'] == 40
+    assert topic['rate_hz'] == pytest.approx(20.0)
+    code, out, _ = run(capsys, 'info', recording)
+    assert code == 0 and '/finger_1/shape' in out and '20.00 Hz' in out
+
+
+def test_export_csv_flattens_fields(capsys, recording, tmp_path):
+    out_dir = tmp_path / 'csv'
+    code, _, err = run(capsys, 'export-csv', recording, out_dir, '--topics',
+                       '/finger_0/pressure', '/finger_1/shape')
+    assert code == 0, err
+    assert sorted(p.name for p in out_dir.iterdir()) == ['finger_0__pressure.csv',
+                                                         'finger_1__shape.csv']
+    with open(out_dir / 'finger_0__pressure.csv', newline='') as handle:
+        rows = list(csv.DictReader(handle))
+    assert len(rows) == 40
+    assert float(rows[3]['fluid_pressure']) == samples(3)['finger_0/pressure'].fluid_pressure
+    assert int(rows[3]['log_time_ns']) == BASE + 3 * 50_000_000 + 1
+    assert rows[3]['header.frame_id'] == 'finger_0'
+    with open(out_dir / 'finger_1__shape.csv', newline='') as handle:
+        poses = json.loads(next(csv.DictReader(handle))['poses'])
+    assert len(poses) == 17 and poses[0]['pose']['orientation']['w'] == 1.0
+
+
+@pytest.mark.parametrize('size', [(640, 480), (1000, 300)])
+def test_plot_writes_pngs_of_the_requested_size(capsys, recording, tmp_path, size):
+    out_dir = tmp_path / 'plots'
+    code, out, err = run(capsys, 'plot', recording, out_dir, '--times', '0,0.5,1.9',
+                         '--size', f'{size[0]}x{size[1]}')
+    assert code == 0, err
+    names = sorted(p.name for p in out_dir.iterdir())
+    assert names == ['curvature.png', 'pressure.png', 'shapes.png']
+    for name in names:
+        image = matplotlib.image.imread(out_dir / name)
+        assert image.shape[:2] == (size[1], size[0])
+        assert image[..., :3].std() > 0.01   # not blank
+
+
+# -- bad input ----------------------------------------------------------------------------
+
+def _truncated(src, dst):
+    data = src.read_bytes()
+    dst.write_bytes(data[:int(len(data) * 0.6)])
+    return dst
+
+
+def _corrupt(src, dst):
+    data = bytearray(src.read_bytes())
+    with McapFile(src) as f:
+        chunk = f.summary.chunk_indexes[1]
+    middle = chunk.chunk_start_offset + chunk.chunk_length // 2
+    data[middle:middle + 16] = bytes(16)
+    dst.write_bytes(bytes(data))
+    return dst
+
+
+def _not_mcap(src, dst):
+    dst.write_bytes(b'this is not an MCAP file at all' * 10)
+    return dst
+
+
+def _no_schema(src, dst):
+    with open(dst, 'wb') as stream:
+        writer = Writer(stream)
+        writer.start(profile='ros2', library='test')
+        channel = writer.register_channel('/finger_0/pressure', 'cdr', schema_id=0)
+        writer.add_message(channel, log_time=1, publish_time=1,
+                           data=serialize_message(samples(0)['finger_0/pressure']))
+        writer.finish()
+    return dst
+
+
+BAD_INPUTS = {'truncated': _truncated, 'corrupt': _corrupt, 'not_mcap': _not_mcap,
+              'no_schema': _no_schema}
+REASONS = {'truncated': 'truncated', 'corrupt': 'damaged', 'not_mcap': 'not an MCAP file',
+           'no_schema': 'has no schema'}
+
+
+def _commands(bad, out):
+    return {
+        'info': ['info', bad],
+        'plot': ['plot', bad, out],
+        'export-csv': ['export-csv', bad, out],
+        'replay-model': ['replay-model', bad, out / 'replayed.mcap', '--quiet'],
+    }
+
+
+# `info` decodes nothing, so a schema-less channel is listed, not an error (tested below).
+@pytest.mark.parametrize('kind, command', [
+    (kind, command) for kind in sorted(BAD_INPUTS)
+    for command in ('info', 'plot', 'export-csv', 'replay-model')
+    if (kind, command) != ('no_schema', 'info')])
+def test_bad_input_fails_cleanly(capsys, recording, tmp_path, kind, command):
+    bad = BAD_INPUTS[kind](recording, tmp_path / f'{kind}.mcap')
+    out = tmp_path / 'out'
+    out.mkdir()
+    sentinel = out / 'replayed.mcap'
+    sentinel.write_bytes(b'previous output')
+    (out / 'curvature.png').write_bytes(b'previous plot')
+    before = sorted(p.name for p in tmp_path.rglob('*'))
+    code, _, err = run(capsys, *_commands(bad, out)[command])
+    assert code == 1
+    assert f'fpc-mcap {command}: error:' in err and 'Traceback' not in err
+    assert REASONS[kind] in err
+    assert sorted(p.name for p in tmp_path.rglob('*')) == before   # no temp files left
+    assert sentinel.read_bytes() == b'previous output'
+    assert (out / 'curvature.png').read_bytes() == b'previous plot'
+
+
+def test_info_flags_a_missing_schema(capsys, recording, tmp_path):
+    bad = _no_schema(recording, tmp_path / 'no_schema.mcap')
+    code, out, err = run(capsys, 'info', bad)
+    assert code == 0, err
+    assert '(no schema)' in out
+
+
+@pytest.mark.parametrize('argv', [
+    ['export-csv', '{rec}', '{out}', '--topics', '/finger_0/nothing'],
+    ['plot', '{rec}', '{out}', '--times', '99'],
+    ['replay-model', '{rec}', '{out}/r.mcap', '--source', 'pressure_command',
+     '--config', '{missing}'],
+])
+def test_unknown_topics_and_bad_options_fail_cleanly(capsys, recording, tmp_path, argv):
+    out = tmp_path / 'out'
+    argv = [a.format(rec=recording, out=out, missing=tmp_path / 'missing.yaml') for a in argv]
+    code, _, err = run(capsys, *argv)
+    assert code == 1 and 'error:' in err
+    assert not out.exists()
+
+
+def test_recover_truncated_file(capsys, recording, tmp_path):
+    bad = _truncated(recording, tmp_path / 'cut.mcap')
+    out = tmp_path / 'fixed.mcap'
+    code, stdout, err = run(capsys, 'recover', bad, out)
+    assert code == 0, err
+    assert 'cut off' in stdout
+    with McapFile(out) as f:
+        assert 0 < f.message_count < 280
+        logs = [m.log_time for m in f.messages(decode=False)]
+    assert logs == sorted(logs)
+
+
+def test_recover_skips_a_damaged_chunk(capsys, recording, tmp_path):
+    bad = _corrupt(recording, tmp_path / 'bad.mcap')
+    code, stdout, err = run(capsys, 'recover', bad, tmp_path / 'fixed.mcap')
+    assert code == 0, err
+    assert '1 damaged chunks skipped' in stdout
+    with McapFile(tmp_path / 'fixed.mcap') as f:
+        chunks = McapFile(recording).chunk_count
+        assert f.message_count < 280 and chunks > 2
+
+
+def test_recover_rejects_a_non_mcap_file(capsys, recording, tmp_path):
+    bad = _not_mcap(recording, tmp_path / 'junk.mcap')
+    code, _, err = run(capsys, 'recover', bad, tmp_path / 'out.mcap')
+    assert code == 1 and 'not an MCAP file' in err
+    assert not (tmp_path / 'out.mcap').exists()

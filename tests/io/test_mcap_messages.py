@@ -1,0 +1,75 @@
+"""Message builders shared by replay-model and the model node."""
+
+import math
+
+from mcap_ros2._dynamic import generate_dynamic
+from mcap_test_utils import FakeResult
+from nav_msgs.msg import Path
+import numpy as np
+from numpy.testing import assert_allclose
+import pytest
+from rclpy.serialization import deserialize_message, serialize_message
+
+from fpc_gripper.io.mcap_writer import message_definition
+from fpc_gripper.io.messages import (gripper_topics, ns_to_time, rigidity_message,
+                                     serialized_shape, shape_marker, shape_message,
+                                     tangent_angles, time_to_ns)
+
+
+def _rotate_x_axis(q):
+    """Image of +X under the unit quaternion q = (x, y, z, w)."""
+    x, y, z, w = q
+    return np.array([1 - 2 * (y * y + z * z), 2 * (x * y + w * z), 2 * (x * z - w * y)])
+
+
+@pytest.mark.parametrize('kappa', [0.0, 12.5, -30.0])
+def test_shape_poses_follow_the_midplane_and_its_tangent(kappa):
+    result = FakeResult(kappa)
+    path = shape_message(result, 'finger_1', 1_234_567_890_123)
+    assert path.header.frame_id == 'finger_1'
+    assert time_to_ns(path.header.stamp) == 1_234_567_890_123
+    assert len(path.poses) == len(result.points)
+    for pose, (x, z), phi in zip(path.poses, result.points, result.tangent):
+        p, q = pose.pose.position, pose.pose.orientation
+        assert (p.x, p.y, p.z) == (x, 0.0, z)
+        assert pose.header == path.header
+        # The pose's +X axis is the tangent (cos phi, 0, sin phi): a rotation about Y only.
+        assert_allclose(_rotate_x_axis((q.x, q.y, q.z, q.w)),
+                        [math.cos(phi), 0.0, math.sin(phi)], atol=1e-15)
+        assert q.x == q.z == 0.0
+
+
+def test_finite_difference_tangents_without_exact_ones():
+    result = FakeResult(20.0, n=201)
+    assert_allclose(tangent_angles(result.points), result.tangent, atol=1e-4)
+
+
+@pytest.mark.parametrize('frame_id', ['', 'f', 'finger_0', 'finger_10', 'a' * 13])
+@pytest.mark.parametrize('n', [2, 3, 129])
+def test_serialized_shape_decodes_to_the_path(frame_id, n):
+    result = FakeResult(7.0, n=n)
+    data = serialized_shape(result, frame_id, 98_765_432_123_456_789)
+    reference = shape_message(result, frame_id, 98_765_432_123_456_789)
+    assert deserialize_message(data, Path) == reference
+    assert len(data) == len(serialize_message(reference))
+    decode = generate_dynamic('nav_msgs/msg/Path', message_definition('nav_msgs/msg/Path'))
+    decoded = decode['nav_msgs/msg/Path'](data)
+    assert [p.pose.position.z for p in decoded.poses] == list(result.points[:, 1])
+
+
+def test_rigidity_and_marker():
+    msg = rigidity_message(1.5e-3, None, 'finger_2', 5)
+    assert (msg.vector.x, msg.vector.y) == (1.5e-3, 0.0) and math.isnan(msg.vector.z)
+    assert msg.header.stamp == ns_to_time(5)
+    marker = shape_marker(FakeResult(10.0), 'finger_2', 5, 2, color=(1.0, 0.5, 0.0, 1.0))
+    assert marker.header.frame_id == 'finger_2' and marker.id == 2
+    assert len(marker.points) == 17 and marker.points[3].y == 0.0
+    assert (marker.color.r, marker.color.g, marker.color.a) == (1.0, 0.5, 1.0)
+
+
+def test_default_topic_list():
+    topics = gripper_topics(['finger_0', 'finger_1'])
+    assert topics[:6] == ['finger_0/pressure_command', 'finger_0/pressure',
+                          'finger_0/tip_force', 'finger_0/shape', 'finger_0/curvature',
+                          'finger_0/rigidity']
+    assert len(topics) == 12 + 6 and '/diagnostics' in topics and 'markers' in topics

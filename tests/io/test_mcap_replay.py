@@ -1,0 +1,155 @@
+"""replay-model: CCM outputs from recorded pressures equal direct core solves."""
+
+import math
+
+from mcap_test_utils import ATM, fluid_pressure, read_independently, wrench
+import numpy as np
+from numpy.testing import assert_allclose
+import pytest
+from rclpy.serialization import serialize_message
+
+from fpc_gripper.io.cli import main
+from fpc_gripper.io.config import default_gripper_config_path, load_gripper_config
+from fpc_gripper.io.mcap_writer import Rosbag2McapWriter
+from fpc_gripper.model import CCMSolver
+
+BASE = 1_700_000_000_000_000_000
+PERIOD = 20_000_000
+GAUGE = [0.0, 40e3, 80e3, 80e3, 120e3, 160e3, 200e3, 150e3]
+FORCES = {2: (0.05, 0.0), 5: (0.0, -0.03)}
+
+
+def write_inputs(path, namespace='/gripper'):
+    """finger_0: commanded pressure and tip forces; finger_1: measured pressure, one < 1 atm."""
+    with Rosbag2McapWriter(path) as writer:
+        writer.add_topic(f'{namespace}/finger_0/pressure_command',
+                         'sensor_msgs/msg/FluidPressure')
+        writer.add_topic(f'{namespace}/finger_0/tip_force', 'geometry_msgs/msg/WrenchStamped')
+        writer.add_topic(f'{namespace}/finger_1/pressure', 'sensor_msgs/msg/FluidPressure')
+        for i, gauge in enumerate(GAUGE):
+            t = BASE + i * PERIOD
+            writer.write(f'{namespace}/finger_0/pressure_command',
+                         serialize_message(fluid_pressure(i, gauge)), t)
+            if i in FORCES:
+                writer.write(f'{namespace}/finger_0/tip_force',
+                             serialize_message(wrench(i, *FORCES[i])), t + 1)
+            measured = gauge * 0.5 if i else -150.0     # below atmospheric: clipped to 0
+            writer.write(f'{namespace}/finger_1/pressure',
+                         serialize_message(fluid_pressure(i, measured)), t + 2)
+    return path
+
+
+def expected_solves(design):
+    """Direct core solves in the replay's order, warm-started from the previous result."""
+    solver = CCMSolver(design, n_segments=8)
+    finger_0, finger_1 = [], []
+    last, force = None, (0.0, 0.0)
+    for i, gauge in enumerate(GAUGE):
+        p = ATM + gauge - ATM
+        last = solver.solve(p, force, initial=last)
+        finger_0.append((p, last))
+        if i in FORCES:
+            force = FORCES[i]
+            last = solver.solve(p, force, initial=last)
+            finger_0.append((p, last))
+    last = None
+    for i, gauge in enumerate(GAUGE):
+        p = max(ATM + (gauge * 0.5 if i else -150.0) - ATM, 0.0)
+        last = solver.solve(p, (0.0, 0.0), initial=last)
+        finger_1.append((p, last))
+    return solver, finger_0, finger_1
+
+
+@pytest.fixture(scope='module')
+def replayed(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp('replay')
+    source = write_inputs(tmp / 'in.mcap')
+    out = tmp / 'out.mcap'
+    assert main(['replay-model', str(source), str(out)]) == 0
+    by_topic = {}
+    for topic, type_name, log_time, publish_time, msg in read_independently(out):
+        by_topic.setdefault(topic, []).append((log_time, publish_time, msg))
+    return by_topic
+
+
+def test_outputs_equal_direct_core_solves(replayed):
+    config = load_gripper_config(default_gripper_config_path())
+    designs = {f.name: f.design for f in config.fingers}
+    assert designs['finger_0'] == designs['finger_1']
+    solver, finger_0, finger_1 = expected_solves(designs['finger_0'])
+    assert sorted(replayed) == sorted(
+        f'/gripper/finger_{k}/{kind}' for k in (0, 1)
+        for kind in ('shape', 'curvature', 'rigidity'))
+    for k, solves in ((0, finger_0), (1, finger_1)):
+        curvature = replayed[f'/gripper/finger_{k}/curvature']
+        shapes = replayed[f'/gripper/finger_{k}/shape']
+        rigidity = replayed[f'/gripper/finger_{k}/rigidity']
+        assert len(curvature) == len(shapes) == len(rigidity) == len(solves)
+        for (p, r), (_, _, kappa), (_, stamp, path), (_, _, k_msg) in zip(
+                solves, curvature, shapes, rigidity):
+            assert r.success
+            assert_allclose(kappa.data, r.curvature, rtol=0, atol=1e-9)
+            xz = np.array([(q.pose.position.x, q.pose.position.z) for q in path.poses])
+            assert_allclose(xz, r.points, rtol=0, atol=1e-9)
+            y = np.array([q.pose.position.y for q in path.poses])
+            assert not y.any()
+            angle = np.array([-2.0 * math.atan2(q.pose.orientation.y, q.pose.orientation.w)
+                              for q in path.poses])
+            assert_allclose(angle, r.tangent, rtol=0, atol=1e-9)
+            assert path.header.frame_id == f'finger_{k}'
+            assert k_msg.header.frame_id == f'finger_{k}'
+            assert_allclose(k_msg.vector.x, solver.rigidity(p, axis='x').value, atol=1e-9,
+                            rtol=0)
+            assert_allclose(k_msg.vector.z, solver.rigidity(p, axis='z').value, atol=1e-9,
+                            rtol=0)
+            assert k_msg.vector.y == 0.0
+            # A cold solve gives the same shape: warm starts do not change the answer.
+            cold = solver.solve(p, r.tip_force)
+            assert_allclose(xz, cold.points, rtol=0, atol=1e-9)
+
+
+def test_times_follow_the_inputs(replayed):
+    log_times = [log for log, _, _ in replayed['/gripper/finger_0/shape']]
+    assert log_times[:4] == [BASE, BASE + PERIOD, BASE + 2 * PERIOD, BASE + 2 * PERIOD + 1]
+    stamps = [msg.header.stamp for _, _, msg in replayed['/gripper/finger_1/shape']]
+    assert [(s.sec, s.nanosec) for s in stamps[:2]] == [(1_700_000_000, 7),
+                                                        (1_700_000_000, 10_000_007)]
+    publish = [pub for _, pub, _ in replayed['/gripper/finger_1/shape']]
+    assert publish[1] == 1_700_000_000 * 10**9 + 10_000_007
+
+
+def test_progress_and_summary(tmp_path, capsys):
+    source = write_inputs(tmp_path / 'in.mcap', namespace='')
+    code = main(['replay-model', str(source), str(tmp_path / 'out.mcap'), '--no-rigidity',
+                 '--source', 'pressure_command'])
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    assert 'replay-model: 10/10 inputs (100 %)' in err
+    assert '10 solves, 0 not converged' in out
+    topics = {t for t, *_ in read_independently(tmp_path / 'out.mcap')}
+    assert topics == {'/finger_0/shape', '/finger_0/curvature', '/finger_0/rigidity'}
+    k = [m for t, _, _, _, m in read_independently(tmp_path / 'out.mcap')
+         if t == '/finger_0/rigidity']
+    assert all(math.isnan(m.vector.x) and math.isnan(m.vector.z) for m in k)
+
+
+def test_unknown_finger_is_an_error(tmp_path, capsys):
+    path = tmp_path / 'in.mcap'
+    with Rosbag2McapWriter(path) as writer:
+        writer.add_topic('/finger_7/pressure', 'sensor_msgs/msg/FluidPressure')
+        writer.write('/finger_7/pressure', serialize_message(fluid_pressure(0, 1e4)), 1)
+    code = main(['replay-model', str(path), str(tmp_path / 'out.mcap'), '--quiet'])
+    assert code == 1
+    assert 'finger_7' in capsys.readouterr().err
+    assert not (tmp_path / 'out.mcap').exists()
+
+
+def test_rigidity_period_reuses_the_last_values(tmp_path):
+    source = write_inputs(tmp_path / 'in.mcap', namespace='')
+    out = tmp_path / 'out.mcap'
+    assert main(['replay-model', str(source), str(out), '--quiet', '--source', 'pressure',
+                 '--rigidity-period', '1.0']) == 0
+    k = [m.vector.x for t, _, _, _, m in read_independently(out) if t.endswith('rigidity')]
+    assert len(k) == len(GAUGE) and len(set(k)) == 1     # all inputs within 1 s
+    assert main(['replay-model', str(source), str(tmp_path / 'x.mcap'), '--quiet',
+                 '--rigidity-period', '-1']) == 1
