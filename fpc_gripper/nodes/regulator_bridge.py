@@ -568,7 +568,7 @@ class RegulatorBridge(LifecycleNode):
             'clamped': str(output.clamped),
             'watchdog': _WATCHDOG_WORDS.get(output.mode, 'ok'),
             'mode': output.mode.name.lower(),
-            'command_age_s': 'none' if age is None else f'{age:.3f}',
+            'command_age_s': 'none' if age is None else f'{age:.6f}',
             'safe_state': supervisor.safe_state.value,
             'max_pressure_pa_gauge': f'{supervisor.max_pressure:.1f}',
             'backend': self._backend_kind,
