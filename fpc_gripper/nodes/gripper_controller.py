@@ -1,0 +1,402 @@
+"""
+Node that closes the loop: aperture and grasp-force goals to finger pressure commands.
+
+Inputs (relative to the namespace): ``aperture_command`` (std_msgs/Float64, [m]),
+``grasp_force_command`` (std_msgs/Float64, contact force per fingertip [N]), per finger
+``finger_<i>/pressure`` (sensor_msgs/FluidPressure, measured, absolute [Pa], sensor-data
+QoS) and ``finger_<i>/tip_force`` (geometry_msgs/WrenchStamped, frame ``finger_<i>``,
+force.x = f0, force.z = p0 [N]). Outputs: ``finger_<i>/pressure_command``
+(FluidPressure, ABSOLUTE [Pa] = gauge + atmospheric_pressure), ``aperture``
+(std_msgs/Float64, the model estimate [m]), ``controller_state`` and ``/diagnostics``.
+
+``controller_state`` is a diagnostic_msgs/DiagnosticStatus, published every control
+step: a standard, typed message (level OK/WARN/ERROR, a message, key/value pairs) that
+every ROS 2 distribution ships, that records to MCAP and decodes without a custom
+schema, and whose level means the same as on ``/diagnostics``. Keys: mode, goal_status,
+aperture_m, aperture_target_m, force_target_n and per finger
+``finger_<i>/{command_pa,feedforward_pa,rho_m,phase,contact_force_n,saturated}``
+(pressures gauge). ``/diagnostics`` carries the same status at 1 Hz and at every change
+of mode, goal status or level (goal reached, stalled, feedback lost).
+
+The control law is :class:`fpc_gripper.control.controller.GripperControlLaw`.
+"""
+
+import functools
+import math
+import sys
+
+from diagnostic_msgs.msg import DiagnosticArray
+from diagnostic_msgs.msg import DiagnosticStatus
+from diagnostic_msgs.msg import KeyValue
+from geometry_msgs.msg import WrenchStamped
+from rcl_interfaces.msg import FloatingPointRange
+from rcl_interfaces.msg import IntegerRange
+from rcl_interfaces.msg import ParameterDescriptor
+from rcl_interfaces.msg import SetParametersResult
+import rclpy
+from rclpy.exceptions import ParameterException
+from rclpy.executors import ExternalShutdownException
+from rclpy.logging import get_logger
+from rclpy.node import Node
+from rclpy.qos import HistoryPolicy
+from rclpy.qos import qos_profile_sensor_data
+from rclpy.qos import QoSProfile
+from rclpy.qos import ReliabilityPolicy
+from sensor_msgs.msg import FluidPressure
+from std_msgs.msg import Float64
+
+from fpc_gripper.control.controller import ControllerConfig
+from fpc_gripper.control.controller import FingerMeasurement
+from fpc_gripper.control.controller import GoalStatus
+from fpc_gripper.control.controller import GripperControlLaw
+from fpc_gripper.control.controller import SAFE_STATES
+from fpc_gripper.control.geometry import PalmGeometry
+from fpc_gripper.control.inverse import InverseModel
+from fpc_gripper.io.config import default_gripper_config_path
+from fpc_gripper.io.config import load_gripper_config
+from fpc_gripper.model import PRESSURE_MODELS
+
+__all__ = ['GripperController', 'main']
+
+_RELIABLE = QoSProfile(depth=10, history=HistoryPolicy.KEEP_LAST,
+                       reliability=ReliabilityPolicy.RELIABLE)
+_THROTTLE_S = 2.0
+_DIAGNOSTICS_PERIOD_S = 1.0
+#: Parameters copied into ControllerConfig (same names).
+_LAW_PARAMETERS = ('max_pressure', 'slew_rate_pa_s', 'approach_rate_pa_s', 'kp', 'ki',
+                   'kp_force', 'ki_force', 'goal_tolerance_m',
+                   'force_tolerance', 'settle_time_s', 'stall_timeout_s', 'feedback_timeout_s',
+                   'safe_state', 'contact_threshold_n')
+
+
+def _float_range(low, high):
+    return [FloatingPointRange(from_value=float(low), to_value=float(high), step=0.0)]
+
+
+def _parameter_table(config_max_pressure):
+    """Return ``(name, default, description, extra descriptor fields)`` of every parameter."""
+    defaults = ControllerConfig()
+    return (
+        ('gripper_config', str(default_gripper_config_path()),
+         'Gripper YAML: fingers, palm radius, pressure limit.', {'read_only': True}),
+        ('n_segments', 8, 'CCM segments of the finger model.',
+         {'read_only': True, 'integer_range': [IntegerRange(from_value=1, to_value=64,
+                                                            step=1)]}),
+        ('pressure_model', 'adiabatic', f'Pressure work model, one of {list(PRESSURE_MODELS)}.',
+         {'read_only': True, 'additional_constraints': f'one of {list(PRESSURE_MODELS)}'}),
+        ('max_pressure', config_max_pressure,
+         'Largest command [Pa gauge]; at most the gripper config max_pressure.',
+         {'floating_point_range': _float_range(0.0, config_max_pressure)}),
+        ('slew_rate_pa_s', defaults.slew_rate_pa_s, 'Command slew limit [Pa/s].',
+         {'floating_point_range': _float_range(1.0e3, 1.0e8)}),
+        ('approach_rate_pa_s', defaults.approach_rate_pa_s,
+         'Slew limit while closing on an object and pressing it [Pa/s].',
+         {'floating_point_range': _float_range(1.0e3, 1.0e8)}),
+        ('kp', defaults.kp, 'Proportional gain on the aperture error in Pa [-].',
+         {'floating_point_range': _float_range(0.0, 100.0)}),
+        ('ki', defaults.ki, 'Integral gain on the aperture error in Pa [1/s].',
+         {'floating_point_range': _float_range(0.0, 100.0)}),
+        ('kp_force', defaults.kp_force, 'Proportional gain on the force error in Pa [-].',
+         {'floating_point_range': _float_range(0.0, 100.0)}),
+        ('ki_force', defaults.ki_force, 'Integral gain on the force error in Pa [1/s].',
+         {'floating_point_range': _float_range(0.0, 100.0)}),
+        ('control_rate_hz', 50.0, 'Control loop rate [Hz].',
+         {'floating_point_range': _float_range(1.0, 1000.0)}),
+        ('goal_tolerance_m', defaults.goal_tolerance_m, 'Aperture goal tolerance [m].',
+         {'floating_point_range': _float_range(1.0e-5, 0.05)}),
+        ('force_tolerance', defaults.force_tolerance,
+         'Relative contact-force goal tolerance [-].',
+         {'floating_point_range': _float_range(0.0, 1.0)}),
+        ('settle_time_s', defaults.settle_time_s,
+         'Time within tolerance before a goal is reached [s].',
+         {'floating_point_range': _float_range(0.0, 60.0)}),
+        ('stall_timeout_s', defaults.stall_timeout_s,
+         'A goal not reached after this long is reported stalled [s].',
+         {'floating_point_range': _float_range(0.1, 3600.0)}),
+        ('feedback_timeout_s', defaults.feedback_timeout_s,
+         'Pressure feedback older than this is lost: safe state and ERROR [s].',
+         {'floating_point_range': _float_range(0.01, 60.0)}),
+        ('safe_state', defaults.safe_state,
+         "On lost feedback: 'vent' commands 0 Pa gauge, 'hold' keeps the last command.",
+         {'additional_constraints': f'one of {list(SAFE_STATES)}'}),
+        ('contact_threshold_n', defaults.contact_threshold_n,
+         'Tip force along +Z above which a finger is in contact [N].',
+         {'floating_point_range': _float_range(1.0e-4, 10.0)}),
+        ('atmospheric_pressure', 101325.0,
+         'Atmospheric pressure [Pa]: absolute = gauge + atmospheric_pressure.',
+         {'floating_point_range': _float_range(3.0e4, 1.2e5)}),
+    )
+
+
+class GripperController(Node):
+    """
+    Aperture and grasp-force controller of a gripper of FPC fingers.
+
+    Parameters
+    ----------
+    node_name : str
+        Node name.
+    **kwargs
+        Passed to :class:`rclpy.node.Node` (namespace, parameter_overrides, context, ...).
+
+    Raises
+    ------
+    ValueError
+        On an unreadable gripper config or invalid starting parameters.
+
+    """
+
+    def __init__(self, node_name='gripper_controller', **kwargs):
+        super().__init__(node_name, **kwargs)
+        self.declare_parameter('gripper_config', str(default_gripper_config_path()),
+                               ParameterDescriptor(description='Gripper YAML.', read_only=True))
+        config = load_gripper_config(self.get_parameter('gripper_config').value)
+        self._gripper = config
+        for name, default, description, extra in _parameter_table(config.max_pressure)[1:]:
+            self.declare_parameter(
+                name, default, ParameterDescriptor(description=description, **extra))
+        # Overrides bypass the on-set callback: check the starting values the same way.
+        result = self._validate_parameters([self.get_parameter(n) for n in _LAW_PARAMETERS])
+        if not result.successful:
+            raise ValueError(result.reason)
+        self._names = config.names
+        models = {}
+        for finger in config.fingers:
+            if finger.design not in models:
+                models[finger.design] = InverseModel(
+                    finger.design, config.palm_radius, config.max_pressure,
+                    n_segments=self.get_parameter('n_segments').value,
+                    pressure_model=self.get_parameter('pressure_model').value)
+        self._law = GripperControlLaw([models[f.design] for f in config.fingers],
+                                      PalmGeometry.from_config(config), self._law_config())
+        n = len(self._names)
+        self._pressure = [None] * n
+        self._stamp = [None] * n
+        self._tip_force = [(0.0, 0.0)] * n
+        self._last_output = None
+        self._max_command = -math.inf
+        self._last_key = None
+        self._last_diagnostics = None
+        self._command_pubs = tuple(
+            self.create_publisher(FluidPressure, f'{name}/pressure_command', _RELIABLE)
+            for name in self._names)
+        self._aperture_pub = self.create_publisher(Float64, 'aperture', _RELIABLE)
+        self._state_pub = self.create_publisher(DiagnosticStatus, 'controller_state', _RELIABLE)
+        self._diagnostics_pub = self.create_publisher(DiagnosticArray, '/diagnostics', _RELIABLE)
+        for i, name in enumerate(self._names):
+            self.create_subscription(FluidPressure, f'{name}/pressure',
+                                     functools.partial(self._on_pressure, i),
+                                     qos_profile_sensor_data)
+            self.create_subscription(WrenchStamped, f'{name}/tip_force',
+                                     functools.partial(self._on_tip_force, i), _RELIABLE)
+        self.create_subscription(Float64, 'aperture_command', self._on_aperture, _RELIABLE)
+        self.create_subscription(Float64, 'grasp_force_command', self._on_grasp, _RELIABLE)
+        self._timer = None
+        self._start_timer()
+        self.add_on_set_parameters_callback(self._validate_parameters)
+        self.add_post_set_parameters_callback(self._apply_parameters)
+        low, high = self._law.aperture_range()
+        self.get_logger().info(
+            f'ready: {n} fingers, palm radius {config.palm_radius * 1e3:.1f} mm, aperture '
+            f'{low * 1e3:.1f}..{high * 1e3:.1f} mm, max_pressure '
+            f'{self._law.max_pressure:.0f} Pa gauge, {self._rate():g} Hz')
+
+    # -- public helpers ---------------------------------------------------------------------
+
+    @property
+    def law(self):
+        """The ROS-free control law."""
+        return self._law
+
+    @property
+    def last_output(self):
+        """The ControlOutput of the last step (None before the first)."""
+        return self._last_output
+
+    @property
+    def max_command_seen(self):
+        """Largest gauge pressure commanded so far [Pa] (-inf before the first command)."""
+        return self._max_command
+
+    @property
+    def finger_names(self):
+        """Finger names in index order."""
+        return self._names
+
+    # -- parameters -------------------------------------------------------------------------
+
+    def _rate(self):
+        return self.get_parameter('control_rate_hz').value
+
+    def _law_config(self, overrides=None):
+        values = {name: self.get_parameter(name).value for name in _LAW_PARAMETERS}
+        values.update(overrides or {})
+        values['max_pressure'] = min(values['max_pressure'], self._gripper.max_pressure)
+        return ControllerConfig(**values)
+
+    def _validate_parameters(self, parameters):
+        overrides = {}
+        for param in parameters:
+            if param.name == 'max_pressure' and param.value > self._gripper.max_pressure:
+                return SetParametersResult(
+                    successful=False,
+                    reason=f'`max_pressure` must be <= the gripper config limit '
+                           f'{self._gripper.max_pressure:.0f} [Pa], got {param.value}')
+            if param.name in _LAW_PARAMETERS:
+                overrides[param.name] = param.value
+        try:
+            self._law_config(overrides)
+        except (TypeError, ValueError) as exc:
+            return SetParametersResult(successful=False, reason=str(exc))
+        return SetParametersResult(successful=True)
+
+    def _apply_parameters(self, parameters):
+        names = {p.name for p in parameters}
+        changed = sorted(names & set(_LAW_PARAMETERS))
+        if changed:
+            self._law.configure(self._law_config())
+            self.get_logger().info('control parameters now ' + ', '.join(
+                f'{n} {self.get_parameter(n).value}' for n in changed))
+        if 'control_rate_hz' in names:
+            self._start_timer()
+
+    def _start_timer(self):
+        if self._timer is not None:
+            self.destroy_timer(self._timer)
+        self._timer = self.create_timer(1.0 / self._rate(), self._on_timer)
+
+    # -- inputs -----------------------------------------------------------------------------
+
+    def _now(self):
+        return self.get_clock().now().nanoseconds * 1e-9
+
+    def _on_pressure(self, index, msg):
+        gauge = msg.fluid_pressure - self.get_parameter('atmospheric_pressure').value
+        if not math.isfinite(gauge):
+            self.get_logger().warning(
+                f'{self._names[index]}/pressure ignored: {msg.fluid_pressure} Pa is not finite',
+                throttle_duration_sec=_THROTTLE_S)
+            return
+        self._pressure[index] = gauge
+        self._stamp[index] = self._now()
+
+    def _on_tip_force(self, index, msg):
+        name = self._names[index]
+        force = msg.wrench.force
+        if msg.header.frame_id not in ('', name):
+            self.get_logger().warning(
+                f'{name}/tip_force ignored: frame {msg.header.frame_id!r} is not {name!r}',
+                throttle_duration_sec=_THROTTLE_S)
+            return
+        if not (math.isfinite(force.x) and math.isfinite(force.z)):
+            self.get_logger().warning(f'{name}/tip_force ignored: not finite',
+                                      throttle_duration_sec=_THROTTLE_S)
+            return
+        self._tip_force[index] = (float(force.x), float(force.z))
+
+    def _on_aperture(self, msg):
+        try:
+            used = self._law.set_aperture(msg.data, self._now())
+        except (TypeError, ValueError) as exc:
+            self.get_logger().warning(f'aperture_command rejected: {exc}')
+            return
+        self.get_logger().info(f'aperture goal {msg.data * 1e3:.1f} mm '
+                               f'(using {used * 1e3:.1f} mm)')
+
+    def _on_grasp(self, msg):
+        try:
+            self._law.set_grasp_force(msg.data, self._now())
+        except (TypeError, ValueError) as exc:
+            self.get_logger().warning(f'grasp_force_command rejected: {exc}')
+            return
+        self.get_logger().info(f'grasp goal {msg.data:.3f} N per fingertip')
+
+    # -- the loop ---------------------------------------------------------------------------
+
+    def _on_timer(self):
+        now = self._now()
+        measurements = [FingerMeasurement(p, s, f) for p, s, f in
+                        zip(self._pressure, self._stamp, self._tip_force)]
+        out = self._law.step(now, measurements)
+        self._last_output = out
+        stamp = self.get_clock().now().to_msg()
+        atmospheric = self.get_parameter('atmospheric_pressure').value
+        if out.commands is not None:
+            ceiling = self._law.max_pressure
+            for i, command in enumerate(out.commands):
+                msg = FluidPressure()
+                msg.header.stamp = stamp
+                msg.header.frame_id = self._names[i]
+                gauge = min(max(command, 0.0), ceiling)
+                self._max_command = max(self._max_command, gauge)
+                msg.fluid_pressure = gauge + atmospheric
+                self._command_pubs[i].publish(msg)
+        if math.isfinite(out.aperture):
+            self._aperture_pub.publish(Float64(data=out.aperture))
+        status = self._status(out)
+        self._state_pub.publish(status)
+        self._report(out, status, now)
+
+    def _status(self, out):
+        values = {
+            'mode': out.mode.value,
+            'goal_status': out.status.name.lower(),
+            'aperture_m': f'{out.aperture:.6f}',
+            'aperture_target_m': f'{out.aperture_target:.6f}',
+            'force_target_n': f'{out.force_target:.4f}',
+        }
+        for name, finger in zip(self._names, out.fingers):
+            values[f'{name}/command_pa'] = f'{finger.command:.1f}'
+            values[f'{name}/feedforward_pa'] = f'{finger.feedforward:.1f}'
+            values[f'{name}/rho_m'] = f'{finger.rho:.6f}'
+            values[f'{name}/phase'] = finger.phase.value
+            values[f'{name}/contact_force_n'] = f'{finger.contact_force:.4f}'
+            values[f'{name}/saturated'] = str(finger.saturated)
+        return DiagnosticStatus(
+            level=bytes([int(out.level)]), name=self.get_fully_qualified_name(),
+            message=out.message, hardware_id='gripper',
+            values=[KeyValue(key=k, value=v) for k, v in values.items()])
+
+    def _report(self, out, status, now):
+        key = (out.mode, out.status, out.level)
+        changed = key != self._last_key
+        if changed:
+            # One call site per severity: rclpy refuses to change it between calls.
+            if int(out.level) == 2:
+                self.get_logger().error(out.message)
+            elif int(out.level) == 1:
+                self.get_logger().warning(out.message)
+            elif out.status is not GoalStatus.ACTIVE:
+                self.get_logger().info(out.message)
+            self._last_key = key
+        due = self._last_diagnostics is None or now - self._last_diagnostics \
+            >= _DIAGNOSTICS_PERIOD_S
+        if changed or due:
+            self._last_diagnostics = now
+            array = DiagnosticArray()
+            array.header.stamp = self.get_clock().now().to_msg()
+            array.status = [status]
+            self._diagnostics_pub.publish(array)
+
+
+def main(args=None):
+    """Run the controller until shutdown."""
+    rclpy.init(args=args)
+    try:
+        node = GripperController()
+    except (ValueError, ParameterException) as exc:
+        get_logger('gripper_controller').fatal(f'cannot start: {exc}')
+        rclpy.try_shutdown()
+        return 1
+    try:
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

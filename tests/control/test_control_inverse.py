@@ -1,0 +1,109 @@
+"""Model-inverse feedforward checked against independent solves of the raw CCM solver."""
+
+from control_sim import fresh_solver, PALM_RADIUS
+import numpy as np
+from numpy.testing import assert_allclose
+import pytest
+
+from fpc_gripper.control.inverse import InverseModel, InverseStatus
+from fpc_gripper.model import ActuatorDesign
+
+DESIGN = ActuatorDesign.paper(prestrain=0.25)
+MAX = 400.0e3
+
+
+@pytest.fixture(scope='module')
+def model():
+    return InverseModel(DESIGN, PALM_RADIUS, MAX)
+
+
+@pytest.fixture(scope='module')
+def solver():
+    return fresh_solver(DESIGN)
+
+
+def rho_of(solver, pressure, tip_force=(0.0, 0.0)):
+    result = solver.solve(pressure, tip_force=tip_force)   # cold start: no shared state
+    assert result.success, result.message
+    return PALM_RADIUS + result.tip[1]
+
+
+@pytest.mark.parametrize('target, tip_force', [
+    (0.0030, (0.0, 0.0)), (0.020, (0.0, 0.0)), (0.050, (0.0, 0.0)), (0.085, (0.0, 0.0)),
+    (0.040, (0.0, 0.2)), (0.030, (0.0, -0.1)), (0.060, (0.05, 0.1)),
+])
+def test_pressure_found_puts_the_tip_at_the_target(model, solver, target, tip_force):
+    result = model.pressure_for_rho(target, tip_force)
+    assert result.success and result.status is InverseStatus.SUCCESS, result.message
+    assert 0.0 < result.x < MAX
+    assert_allclose(rho_of(solver, result.x, tip_force), target, atol=1e-6, rtol=0)
+
+
+def test_out_of_reach_targets_return_the_nearest_end(model, solver):
+    low = model.pressure_for_rho(0.001)
+    assert (low.x, low.status, low.success) == (0.0, InverseStatus.BELOW_RANGE, False)
+    high = model.pressure_for_rho(0.095)
+    assert (high.x, high.status) == (MAX, InverseStatus.ABOVE_RANGE)
+    assert_allclose(high.rho, rho_of(solver, MAX), atol=1e-9)
+
+
+@pytest.mark.parametrize('force', [0.1, 0.5, 1.0])
+def test_grasp_pressure_presses_the_tip_on_the_object(model, solver, force):
+    diameter = 0.040
+    result = model.pressure_for_grasp(diameter, force)
+    assert result.success, result.message
+    assert_allclose(rho_of(solver, result.x, (0.0, force)), diameter / 2, atol=1e-6, rtol=0)
+
+
+def test_grasp_pressure_falls_with_force_and_saturates(model):
+    pressures = [model.pressure_for_grasp(0.040, f).x for f in (0.0, 0.2, 0.4, 0.8, 1.2)]
+    assert np.all(np.diff(pressures) < 0.0)
+    # At 0 N the grasp pressure is the pressure at which the free tip touches the object.
+    assert pressures[0] == pytest.approx(model.pressure_for_rho(0.020).x, abs=0.01)
+    too_hard = model.pressure_for_grasp(0.040, 3.0)
+    assert (too_hard.x, too_hard.status) == (0.0, InverseStatus.BELOW_RANGE)
+
+
+def test_map_matches_the_solver(model, solver):
+    for p in np.linspace(0.0, MAX, 13):
+        assert model.rho_map(p) == pytest.approx(rho_of(solver, p), abs=1e-5)
+        assert model.map_pressure(model.rho_map(p)) == pytest.approx(p, abs=100.0)
+
+
+def test_linearisation_against_independent_differences(model, solver):
+    p, force = 150.0e3, (0.0, 0.3)
+    lin = model.linearise(p, force)
+    assert lin.rho == pytest.approx(rho_of(solver, p, force), abs=1e-9)
+    dp = (rho_of(solver, p + 2e3, force) - rho_of(solver, p - 2e3, force)) / 4e3
+    df = (rho_of(solver, p, (0.0, 0.32)) - rho_of(solver, p, (0.0, 0.28))) / 0.04
+    assert lin.drho_dp == pytest.approx(dp, rel=2e-3)
+    assert lin.drho_dp0 == pytest.approx(df, rel=2e-3)
+    # dP/dp0 at constant rho is the slope of the grasp inverse.
+    diameter = 2.0 * lin.rho
+    slope = (model.pressure_for_grasp(diameter, 0.32).x
+             - model.pressure_for_grasp(diameter, 0.28).x) / 0.04
+    assert lin.dp_dforce == pytest.approx(slope, rel=5e-3)
+
+
+def test_estimate_stays_close_to_the_exact_model(model, solver):
+    errors = []
+    for p, f in [(100e3, 0.0), (102e3, 0.0), (103.9e3, 0.01), (250e3, 0.25), (252.5e3, 0.27)]:
+        rho, _ = model.estimate(p, (0.0, f))
+        errors.append(rho - rho_of(solver, p, (0.0, f)))
+    assert np.max(np.abs(errors)) < 2e-5
+
+
+def test_non_monotone_range_is_refused():
+    with pytest.raises(ValueError, match='max_pressure'):
+        InverseModel(DESIGN, PALM_RADIUS, 800.0e3, grid_step=25.0e3)
+
+
+@pytest.mark.parametrize('call, word', [
+    (lambda m: m.pressure_for_rho(float('nan')), 'rho'),
+    (lambda m: m.pressure_for_rho(0.02, (0.0,)), 'tip_force'),
+    (lambda m: m.pressure_for_grasp(-0.01, 0.5), 'object_diameter'),
+    (lambda m: m.pressure_for_grasp(0.04, -0.5), 'force'),
+])
+def test_bad_input_names_the_argument(model, call, word):
+    with pytest.raises(ValueError, match=word):
+        call(model)

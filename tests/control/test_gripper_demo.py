@@ -1,0 +1,54 @@
+"""The gripper_demo console script end to end, its recording read by an independent decoder."""
+
+import os
+import pathlib
+import subprocess
+import sys
+
+from mcap.reader import make_reader
+from mcap_ros2.decoder import DecoderFactory
+import pytest
+
+from fpc_gripper.io.config import load_gripper_config
+from fpc_gripper.nodes.gripper_demo import _path_tip_z
+
+ATM = 101325.0
+ROOT = pathlib.Path(__file__).resolve().parents[2]
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+def test_demo_session_passes_and_records(tmp_path):
+    env = dict(os.environ, PYTHONUNBUFFERED='1')
+    run = subprocess.run(
+        [sys.executable, '-m', 'fpc_gripper.nodes.gripper_demo', '--output-dir', str(tmp_path)],
+        cwd=ROOT, env=env, capture_output=True, text=True, timeout=110)
+    assert run.returncode == 0, run.stdout + run.stderr
+    assert 'session PASSED' in run.stdout
+    for phase in ('open', 'grasp', 'hold', 'release'):
+        assert any(line.startswith(phase) and 'REACHED' in line
+                   for line in run.stdout.splitlines()), run.stdout
+    png = tmp_path / 'session.png'
+    assert png.read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
+    topics = {}
+    with open(tmp_path / 'session.mcap', 'rb') as stream:
+        reader = make_reader(stream, decoder_factories=[DecoderFactory()])
+        for _, channel, _, decoded in reader.iter_decoded_messages():
+            topics.setdefault(channel.topic, []).append(decoded)
+    limit = load_gripper_config().max_pressure
+    for i in range(3):
+        commands = topics[f'/finger_{i}/pressure_command']
+        assert len(commands) > 100
+        assert max(m.fluid_pressure for m in commands) <= ATM + limit
+        forces = [m.wrench.force.z for m in topics[f'/finger_{i}/tip_force']]
+        assert max(forces) > 0.4 and min(forces) == 0.0     # grasped, and released
+    states = [m for m in topics['/controller_state']]
+    assert {kv.value for m in states for kv in m.values if kv.key == 'goal_status'} \
+        >= {'active', 'reached'}
+
+
+def test_path_tip_decoder_handles_empty_and_foreign_payloads():
+    from nav_msgs.msg import Path
+    from rclpy.serialization import serialize_message
+    assert _path_tip_z(serialize_message(Path())) is None
+    assert _path_tip_z(b'\x00\x02' + bytes(80)) is None
