@@ -10,13 +10,17 @@ from scipy.linalg import eigh
 from .analysis import fit_circle, flexural_rigidity
 from .design import ActuatorDesign
 from .energy import load_derivatives, load_energy, segment_derivatives, segment_energy
-from .kinematics import from_scaled, midplane_samples, node_positions, to_scaled
+from .kinematics import (consistent_strain_map, from_scaled, midplane_samples, node_positions,
+                         to_scaled)
 from .section import build_segments, uniform_edges
 
 __all__ = ['CCMSolver', 'CCMResult', 'RigidityResult', 'SolverStatus', 'PRESSURE_MODELS']
 
 #: Pressure-work coefficient k_p of Pi_P = -k_p P V (SPEC "Pressure work"); gamma = 1.4.
 PRESSURE_MODELS = {'adiabatic': 1.0 / (1.4 - 1.0), 'isobaric': 1.0}
+#: Midplane reconstructions: the paper's, or one that converges to the rod as N grows
+#: (kinematics.consistent_strain_map).
+RECONSTRUCTIONS = ('paper', 'consistent')
 #: Largest Newton step in any scaled unknown; keeps iterates where the quintic PEMC
 #: energy (unbounded below at large tension) is meaningful.
 _MAX_STEP = 0.5
@@ -228,6 +232,12 @@ class CCMSolver:
         Gradient tolerance relative to the axial stiffness of a segment.
     xtol : float
         Largest final Newton step in the scaled unknowns.
+    reconstruction : {'paper', 'consistent'}
+        'paper' (default, SPEC) or 'consistent': segment chords and end rotations
+        that converge to the rod's as N grows (deformed curvature kappa / (1 + eps));
+        see `kinematics.consistent_strain_map`. With 'consistent', `coefficients`
+        hold the reconstruction coefficients; map them with that function to get
+        the strain's (b1, b3, c1, d).
 
     References
     ----------
@@ -237,7 +247,7 @@ class CCMSolver:
 
     def __init__(self, design, n_segments=8, pressure_model='adiabatic', segment_edges=None,
                  load_points=(), samples_per_segment=16, max_iterations=60, gtol=1e-10,
-                 xtol=1e-9):
+                 xtol=1e-9, reconstruction='paper'):
         if not isinstance(design, ActuatorDesign):
             raise TypeError(f'`design` must be an ActuatorDesign, got {type(design).__name__}')
         if pressure_model not in PRESSURE_MODELS:
@@ -250,6 +260,10 @@ class CCMSolver:
                             ('max_iterations', max_iterations)):
             if not isinstance(value, (int, np.integer)) or value < 2:
                 raise ValueError(f'`{name}` must be an integer >= 2, got {value!r}')
+        if reconstruction not in RECONSTRUCTIONS:
+            raise ValueError(f'`reconstruction` must be one of {RECONSTRUCTIONS}, '
+                             f'got {reconstruction!r}')
+        self.reconstruction = reconstruction
         self.design = design
         self.pressure_model = pressure_model
         self.pressure_coefficient = PRESSURE_MODELS[pressure_model]
@@ -278,13 +292,21 @@ class CCMSolver:
     # -- energy -----------------------------------------------------------
     def _total_energy(self, q, pressure, loads):
         work = self.pressure_coefficient * pressure
-        energy = segment_energy(q, self.segments, *self._params, work).sum()
+        qs = q if self.reconstruction == 'paper' else consistent_strain_map(q)[0]
+        energy = segment_energy(qs, self.segments, *self._params, work).sum()
         return energy + load_energy(q, self.segments.lengths, loads)
 
     def _derivatives(self, q, pressure, loads):
         """Energy, gradient (N, 4) and Hessian: (N, 4, 4) blocks or dense (4N, 4N)."""
         work = self.pressure_coefficient * pressure
-        energy, grad, hess = segment_derivatives(q, self.segments, *self._params, work)
+        if self.reconstruction == 'paper':
+            energy, grad, hess = segment_derivatives(q, self.segments, *self._params, work)
+        else:
+            qs, jac, hess3 = consistent_strain_map(q)
+            energy, g_s, h_s = segment_derivatives(qs, self.segments, *self._params, work)
+            grad = np.matmul(g_s[:, None, :], jac)[:, 0, :]
+            hess = np.matmul(jac.transpose(0, 2, 1), np.matmul(h_s, jac))
+            hess += g_s[:, 3, None, None] * hess3
         energy = energy.sum()
         if not loads:
             return energy, grad, hess

@@ -1,0 +1,376 @@
+"""Model selection on the ladder (arc, CCM-N, rod) and automatic segment refinement."""
+
+from dataclasses import dataclass
+import functools
+import json
+import math
+import pathlib
+
+import numpy as np
+
+from .design import ActuatorDesign
+from .ladder import ArcSolver, RodSolver
+from .section import uniform_edges
+from .section_law import station_layout
+from .solver import _finite, CCMSolver, PRESSURE_MODELS
+
+__all__ = ['Scene', 'ModelChoice', 'RUNGS', 'choose_model', 'load_error_model', 'make_solver',
+           'a_posteriori_error', 'solve_auto_refine', 'RefinedResult', 'aligned_edges']
+
+#: Rungs of the ladder: uniform arc (a), CCM with the paper's reconstruction, CCM with the
+#: consistent reconstruction (uniform segments, or 'ccm_aligned': segment edges on every
+#: section change -- rib edges and channel end), geometrically exact rod (d).
+RUNGS = ('arc', 'ccm', 'ccm_consistent', 'ccm_aligned', 'rod')
+_DATA = pathlib.Path(__file__).resolve().parents[1] / 'data' / 'error_model.json'
+
+
+@dataclass(frozen=True)
+class Scene:
+    """
+    One loading case of one finger.
+
+    Parameters
+    ----------
+    design : ActuatorDesign
+        The finger (its prestrain included).
+    pressure : float
+        Gauge pressure [Pa].
+    tip_force : (float, float)
+        (f0, p0) along global X and Z [N].
+    pressure_model : {'adiabatic', 'isobaric'}
+
+    """
+
+    design: ActuatorDesign
+    pressure: float = 0.0
+    tip_force: tuple = (0.0, 0.0)
+    pressure_model: str = 'adiabatic'
+
+    def __post_init__(self):
+        if not isinstance(self.design, ActuatorDesign):
+            raise TypeError(f'`design` must be an ActuatorDesign, got '
+                            f'{type(self.design).__name__}')
+        pressure = _finite('pressure', self.pressure, '[Pa]')
+        if pressure < 0.0:
+            raise ValueError(f'`pressure` must be >= 0 (gauge) [Pa], got {pressure}')
+        object.__setattr__(self, 'pressure', pressure)
+        if np.shape(self.tip_force) != (2,):
+            raise ValueError(f'`tip_force` must be (f0, p0) [N], got {self.tip_force!r}')
+        object.__setattr__(self, 'tip_force', tuple(
+            _finite(f'tip_force[{i}]', f, '[N]') for i, f in enumerate(self.tip_force)))
+        if self.pressure_model not in PRESSURE_MODELS:
+            raise ValueError(f'`pressure_model` must be one of {sorted(PRESSURE_MODELS)}, '
+                             f'got {self.pressure_model!r}')
+
+    @property
+    def load(self):
+        """Magnitude of the tip force [N]."""
+        return float(math.hypot(*self.tip_force))
+
+
+@dataclass(frozen=True)
+class ModelChoice:
+    """
+    The rung and segment count picked for a scene.
+
+    Attributes
+    ----------
+    rung : str
+        One of `RUNGS`.
+    n_segments : int
+        Segments of the CCM rungs (1 for the arc, element count for the rod).
+    predicted_error : float
+        Bound on the tip-position error against the rod [m].
+    reason : str
+        Why this model was chosen.
+    cost : float
+        Median solve time measured by bench/bench_ladder.py [s] (nan if unknown).
+
+    """
+
+    rung: str
+    n_segments: int
+    predicted_error: float
+    reason: str
+    cost: float = float('nan')
+
+    def make_solver(self, design, pressure_model='adiabatic'):
+        """Build the solver of this choice for a design."""
+        return make_solver(self.rung, self.n_segments, design, pressure_model)
+
+
+def make_solver(rung, n_segments, design, pressure_model='adiabatic'):
+    """
+    Build the solver of a rung.
+
+    Parameters
+    ----------
+    rung : str
+        One of `RUNGS`.
+    n_segments : int
+        CCM segments (ignored by the arc and the rod).
+    design : ActuatorDesign
+    pressure_model : {'adiabatic', 'isobaric'}
+
+    """
+    if rung == 'arc':
+        return ArcSolver(design, pressure_model=pressure_model)
+    if rung == 'ccm':
+        return CCMSolver(design, n_segments=int(n_segments), pressure_model=pressure_model)
+    if rung == 'ccm_consistent':
+        return CCMSolver(design, n_segments=int(n_segments), pressure_model=pressure_model,
+                         reconstruction='consistent')
+    if rung == 'ccm_aligned':
+        return CCMSolver(design, segment_edges=aligned_edges(design, n_segments),
+                         pressure_model=pressure_model, reconstruction='consistent')
+    if rung == 'rod':
+        return RodSolver(design, pressure_model=pressure_model)
+    raise ValueError(f'`rung` must be one of {RUNGS}, got {rung!r}')
+
+
+def aligned_edges(design, n_segments):
+    """
+    Segment edges on every section change (rib edges, channel end), N segments in all.
+
+    A CCM segment has one curvature, so a segment that straddles a rib edge
+    mixes two very different sections; its error then falls only as 1/N. With
+    edges on the section changes the consistent CCM converges as 1/N^2.
+
+    Parameters
+    ----------
+    design : ActuatorDesign
+    n_segments : int
+        Total N, at least the number of constant-section intervals (22 for the paper).
+
+    Returns
+    -------
+    ndarray, shape (N + 1,)
+        Edges [m].
+
+    """
+    breaks = station_layout(design, ribs='exact')[0]
+    return uniform_edges(design.free_length, int(n_segments), breaks[1:-1])
+
+
+@functools.lru_cache(maxsize=4)
+def _load_cached(path):
+    return json.loads(pathlib.Path(path).read_text())
+
+
+def load_error_model(path=None):
+    """
+    Read the measured error model written by bench/bench_ladder.py.
+
+    Parameters
+    ----------
+    path : str or Path, optional
+        Default: the package's data/error_model.json.
+
+    Returns
+    -------
+    dict
+        See `choose_model` for the layout.
+
+    """
+    path = pathlib.Path(_DATA if path is None else path)
+    if not path.is_file():
+        raise ValueError(f'error model {path} does not exist; run bench/bench_ladder.py')
+    return _load_cached(str(path))
+
+
+def _scene_features(scene):
+    """Return (turning |kappa L| of the arc rung [rad], arc result) of a scene."""
+    arc = ArcSolver(scene.design, pressure_model=scene.pressure_model)
+    result = arc.solve(scene.pressure, scene.tip_force)
+    return abs(float(result.beta[0])), result
+
+
+def choose_model(scene, tolerance, error_model=None):
+    """
+    Pick the cheapest rung and segment count whose tip error meets a tolerance.
+
+    The error model (bench/bench_ladder.py) stores, for every rung and N, the
+    largest measured tip-position error against the rod in bins of the scene's
+    turning |kappa L| (estimated here by the arc rung, about 1 ms) and of the
+    tip-load magnitude, made non-decreasing in both, and whether any scene of
+    the bin broke the CCM's small-rotation rule. A model is eligible in a bin
+    that has data, no invalid state and bound * safety <= tolerance; the
+    cheapest eligible model by measured median time wins. Scenes outside the
+    measured ranges (prestrain, pressure, load, turning) get the rod.
+
+    Parameters
+    ----------
+    scene : Scene
+    tolerance : float
+        Tip-position tolerance [m], > 0.
+    error_model : dict, optional
+        Default: `load_error_model()`.
+
+    Returns
+    -------
+    ModelChoice
+
+    """
+    if not isinstance(scene, Scene):
+        raise TypeError(f'`scene` must be a Scene, got {type(scene).__name__}')
+    tolerance = _finite('tolerance', tolerance, '[m]')
+    if tolerance <= 0.0:
+        raise ValueError(f'`tolerance` must be > 0 [m], got {tolerance}')
+    model = load_error_model() if error_model is None else error_model
+    rod_cost = next((m['time'] for m in model['models'] if m['rung'] == 'rod'), float('nan'))
+    ranges = model['ranges']
+    prestrain = scene.design.prestrain
+    outside = []
+    if not ranges['prestrain'][0] <= prestrain <= ranges['prestrain'][1]:
+        outside.append(f'prestrain {prestrain:g}')
+    if not scene.pressure <= ranges['pressure'][1]:
+        outside.append(f'pressure {scene.pressure:g} Pa')
+    load_edges = model['load_bins']
+    if scene.load > load_edges[-1] * (1 + 1e-12):
+        outside.append(f'load {scene.load:g} N')
+    turning, _ = _scene_features(scene)
+    turn_edges = model['turning_bins']
+    if turning > turn_edges[-1]:
+        outside.append(f'turning {turning:.3g} rad')
+    if outside:
+        return ModelChoice('rod', 0, 0.0, 'outside the measured envelope ('
+                           + ', '.join(outside) + '): geometrically exact rod', rod_cost)
+    t_bin = int(np.searchsorted(turn_edges, turning, side='left'))
+    l_bin = int(np.searchsorted(load_edges, scene.load * (1 - 1e-12), side='left'))
+    safety = float(model['safety'])
+    best = None
+    for entry in sorted(model['models'], key=lambda m: m['time']):
+        if entry['rung'] == 'rod':
+            continue
+        bound = entry['bound'][l_bin][t_bin]
+        if bound is None or entry['invalid'][l_bin][t_bin]:
+            continue
+        if bound * safety <= tolerance:
+            best = entry
+            break
+    if best is None:
+        return ModelChoice('rod', 0, 0.0, f'no cheaper model meets {tolerance:g} m at turning '
+                           f'{turning:.2f} rad and load {scene.load:g} N', rod_cost)
+    bound = best['bound'][l_bin][t_bin] * safety
+    return ModelChoice(best['rung'], int(best['n_segments']), float(bound),
+                       f"cheapest measured model with bound {bound:.2e} m <= {tolerance:g} m "
+                       f'at turning {turning:.2f} rad and load {scene.load:g} N',
+                       float(best['time']))
+
+
+def a_posteriori_error(scene, rung, n_segments):
+    """
+    Estimate the tip error of a CCM rung from solves at N and 2N [m].
+
+    The consistent CCM converges to the rod, at second order where segment
+    edges fall on section changes and at first order across ribs, so
+    |tip_N - tip_2N| is a first-order (conservative) estimate. The paper's CCM
+    converges to another limit; its estimate adds |tip_2N(paper) -
+    tip_2N(consistent)|, the reconstruction difference.
+
+    Returns
+    -------
+    float
+        Estimated tip-position error [m]; inf if a solve fails or is invalid.
+
+    """
+    if rung not in ('ccm', 'ccm_consistent'):
+        raise ValueError(f"`rung` must be 'ccm' or 'ccm_consistent', got {rung!r}")
+    design, p, f = scene.design, scene.pressure, scene.tip_force
+    results = [make_solver(rung, n, design, scene.pressure_model).solve(p, f)
+               for n in (n_segments, 2 * n_segments)]
+    if rung == 'ccm':
+        results.append(make_solver('ccm_consistent', 2 * n_segments, design,
+                                   scene.pressure_model).solve(p, f))
+    if not all(r.success and r.valid for r in results):
+        return math.inf
+    estimate = float(np.linalg.norm(results[0].tip - results[1].tip))
+    if rung == 'ccm':
+        estimate += float(np.linalg.norm(results[1].tip - results[2].tip))
+    return estimate
+
+
+class RefinedResult:
+    """
+    A CCM result after automatic refinement; other attributes come from `result`.
+
+    Attributes
+    ----------
+    success : bool
+        The final solve converged to a stable state that obeys the small-rotation rule.
+    message : str
+    n_segments : int
+        Segments of the final solve.
+    history : list of (int, bool, bool)
+        (N, success, valid) of every solve.
+    result : CCMResult
+
+    """
+
+    def __init__(self, result, history, success, message):
+        self.result = result
+        self.history = history
+        self.success = bool(success)
+        self.message = message
+        self.n_segments = result.solver.n_segments
+
+    def __getattr__(self, name):
+        return getattr(self.__dict__['result'], name)
+
+    def __repr__(self):
+        return (f'RefinedResult(success={self.success}, n_segments={self.n_segments}, '
+                f'tip={self.result.tip.round(6).tolist()})')
+
+
+def solve_auto_refine(design, pressure=0.0, tip_force=(0.0, 0.0), n_segments=8,
+                      max_segments=128, pressure_model='adiabatic', reconstruction='paper'):
+    """
+    Production path: damped Newton with continuation, doubling N until the result is valid.
+
+    A segment past the small-rotation rule (|2 d L_i| >= 1, about 45 degrees)
+    or a failed solve doubles N and solves again from the flat state.
+
+    Parameters
+    ----------
+    design : ActuatorDesign
+    pressure : float
+        Gauge pressure [Pa].
+    tip_force : (float, float)
+        (f0, p0) [N].
+    n_segments : int
+        First N.
+    max_segments : int
+        Largest N tried.
+    pressure_model : {'adiabatic', 'isobaric'}
+    reconstruction : {'paper', 'consistent'}
+
+    Returns
+    -------
+    RefinedResult
+        success False, with the reason, if no N <= max_segments gives a converged, valid state.
+
+    """
+    if isinstance(n_segments, bool) or not isinstance(n_segments, (int, np.integer)) \
+            or n_segments < 1:
+        raise ValueError(f'`n_segments` must be an integer >= 1, got {n_segments!r}')
+    if isinstance(max_segments, bool) or not isinstance(max_segments, (int, np.integer)) \
+            or max_segments < n_segments:
+        raise ValueError(f'`max_segments` must be an integer >= n_segments = {n_segments}, '
+                         f'got {max_segments!r}')
+    history = []
+    n = int(n_segments)
+    result = None
+    while n <= max_segments:
+        solver = CCMSolver(design, n_segments=n, pressure_model=pressure_model,
+                           reconstruction=reconstruction)
+        result = solver.solve(pressure, tip_force)
+        history.append((n, result.success, result.valid))
+        if result.success and result.valid:
+            note = '' if n == n_segments else f' after refinement to N = {n}'
+            return RefinedResult(result, history, True, result.message + note)
+        n *= 2
+    last = history[-1]
+    why = ('did not converge: ' + result.message) if not last[1] else \
+        'still breaks the small-rotation rule'
+    return RefinedResult(result, history, False,
+                         f'no valid equilibrium up to N = {last[0]}: {why}')
