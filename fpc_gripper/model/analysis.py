@@ -44,6 +44,25 @@ def _signed_distances(params, x, z, r2):
     return 2.0 * p / (1.0 + np.sqrt(np.maximum(1.0 + 4.0 * a * p, 0.0)))
 
 
+def _distance_jacobian(params, x, z, r2):
+    """Exact d(distance)/d(A, D, phi) of `_signed_distances`, shape (M, 3)."""
+    a, d, phi = params
+    u = np.sqrt(max(1.0 + 4.0 * a * d, 1e-300))
+    c, s = np.cos(phi), np.sin(phi)
+    along = c * x + s * z
+    p = a * r2 + u * along + d
+    q = np.sqrt(np.maximum(1.0 + 4.0 * a * p, 1e-300))
+    one_q = 1.0 + q
+    # d = 2 P / (1 + Q) with Q = sqrt(1 + 4 A P): partials in P and, explicitly, in A.
+    dd_dp = 2.0 / one_q - 2.0 * p / one_q ** 2 * (2.0 * a / q)
+    dd_da = -2.0 * p / one_q ** 2 * (2.0 * p / q)
+    jac = np.empty((x.size, 3))
+    jac[:, 0] = dd_dp * (r2 + 2.0 * d / u * along) + dd_da
+    jac[:, 1] = dd_dp * (1.0 + 2.0 * a / u * along)
+    jac[:, 2] = dd_dp * u * (-s * x + c * z)
+    return jac
+
+
 def fit_circle(points):
     """
     Fit a circle to points by orthogonal distance, regular at zero curvature.
@@ -84,8 +103,8 @@ def fit_circle(points):
         if np.isfinite(value) and norm > 0 and (best is None or abs(value) < best[0]):
             best = (abs(value), vec / np.sqrt(norm))
     a, b, c, d = best[1]
-    fit = least_squares(_signed_distances, (a, d, np.arctan2(c, b)), args=(x, z, r2),
-                        method='lm', xtol=1e-15, ftol=1e-15, gtol=1e-15)
+    fit = least_squares(_signed_distances, (a, d, np.arctan2(c, b)), jac=_distance_jacobian,
+                        args=(x, z, r2), method='lm', xtol=1e-15, ftol=1e-15, gtol=1e-15)
     a, d, phi = fit.x
     u = np.sqrt(max(1.0 + 4.0 * a * d, 0.0))
     b, c = u * np.cos(phi), u * np.sin(phi)

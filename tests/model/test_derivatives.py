@@ -122,3 +122,16 @@ def test_circle_fit_rmsd_is_the_orthogonal_distance():
     dist = np.hypot(*(pts - fit.center).T) - 1.0 / abs(fit.curvature)
     assert fit.rmsd == pytest.approx(np.sqrt(np.mean(dist ** 2)), rel=1e-9)
     assert fit.curvature == pytest.approx(20.0, rel=1e-3)
+
+
+def test_circle_distance_jacobian_matches_finite_differences():
+    from fpc_gripper.model.analysis import _distance_jacobian, _signed_distances
+    rng = np.random.default_rng(5)
+    x, z = rng.normal(size=(2, 30))
+    r2 = x * x + z * z
+    for params in ((0.3, -0.2, 0.7), (0.0, 0.1, -1.2), (-0.8, 0.05, 2.5)):
+        params = np.array(params)
+        fd = approx_derivative(lambda p: _signed_distances(p, x, z, r2), params,
+                               method='3-point', abs_step=1e-7)
+        np.testing.assert_allclose(_distance_jacobian(params, x, z, r2), fd, rtol=1e-6,
+                                   atol=1e-8)
