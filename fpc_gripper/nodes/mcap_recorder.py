@@ -2,6 +2,7 @@
 
 import functools
 import importlib
+import struct
 import sys
 import time
 
@@ -11,11 +12,10 @@ from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-from rclpy.serialization import serialize_message
 
 from ..io.mcap_writer import (normalize_type_name, Rosbag2McapWriter, SchemaNotFoundError,
                               type_description_hash)
-from ..io.messages import gripper_topics, time_to_ns
+from ..io.messages import gripper_topics
 
 __all__ = ['McapRecorder', 'main']
 
@@ -80,6 +80,7 @@ class McapRecorder(Node):
         super().__init__('mcap_recorder', **kwargs)
         self._writer = None
         self._subs = {}
+        self._stamped = {}
         self._flush_timer = None
         self._params = {}
         self._write_errors = 0
@@ -221,8 +222,12 @@ class McapRecorder(Node):
             self._subscribe(topic, msg_class, adapt_qos_to_publishers(profiles))
 
     def _subscribe(self, topic, msg_class, qos):
+        # Raw subscriptions hand over the CDR bytes: nothing is deserialised and
+        # serialised again, which for a 129-pose Path costs milliseconds per message.
+        self._stamped[topic] = _starts_with_header(msg_class)
         self._subs[topic] = (self.create_subscription(
-            msg_class, topic, functools.partial(self._on_message, topic), qos), msg_class, qos)
+            msg_class, topic, functools.partial(self._on_message, topic), qos, raw=True),
+            msg_class, qos)
         self.get_logger().info(
             f'recording {topic} [{self._writer.topics[topic]}] '
             f'({qos.reliability.name.lower()}, {qos.durability.name.lower()})')
@@ -240,16 +245,13 @@ class McapRecorder(Node):
             self.destroy_subscription(subscription)
             self._subscribe(topic, msg_class, wanted)
 
-    def _on_message(self, topic, msg):
+    def _on_message(self, topic, data):
         if self._writer is None:
             return
         log_time = self.get_clock().now().nanoseconds
-        header = getattr(msg, 'header', None)
-        stamp = getattr(header, 'stamp', None)
-        publish_time = time_to_ns(stamp) if stamp is not None else 0
+        publish_time = _cdr_header_stamp(data) if self._stamped.get(topic) else 0
         try:
-            self._writer.write(topic, serialize_message(msg), log_time,
-                               publish_time or log_time)
+            self._writer.write(topic, bytes(data), log_time, publish_time or log_time)
         except OSError as error:
             self._write_errors += 1
             self.get_logger().error(f'write failed ({self._write_errors} lost): {error}',
@@ -281,6 +283,25 @@ class McapRecorder(Node):
         """Close the recording, then destroy the node."""
         self.close()
         return super().destroy_node()
+
+
+def _starts_with_header(msg_class):
+    """Whether a message type's first field is a std_msgs/Header."""
+    fields = list(msg_class.get_fields_and_field_types().items())
+    return bool(fields) and fields[0] == ('header', 'std_msgs/Header')
+
+
+def _cdr_header_stamp(data):
+    """
+    Header stamp [ns] of a serialised message that starts with a std_msgs/Header.
+
+    CDR: a 4-byte encapsulation header (byte 1 is 1 for little endian), then the
+    stamp's int32 sec and uint32 nanosec. Returns 0 if the data is too short.
+    """
+    if len(data) < 12:
+        return 0
+    sec, nanosec = struct.unpack_from('<iI' if data[1] == 1 else '>iI', data, 4)
+    return sec * 1_000_000_000 + nanosec
 
 
 def main(args=None):
