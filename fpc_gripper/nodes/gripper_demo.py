@@ -355,11 +355,9 @@ def run_session(output_dir, object_diameter=0.040, grasp_force=0.5, open_apertur
         virtual = VirtualObjectNode(parameter_overrides=[
             cfg, Parameter('object_diameter', value=float(object_diameter))], **common)
         nodes.append(virtual)
-        # Not rigidity (expensive to compute, not part of the session), nor shape and
-        # markers: the recorder takes every message as a Python object, and a 129-pose
-        # Path costs ~10 ms that way, which would starve this single-process executor.
-        topics = [t for t in gripper_topics(config.names)
-                  if not t.endswith(('/rigidity', '/shape', 'markers'))]
+        # Not rigidity: subscribing would make the model node compute K_x and K_z on
+        # every solve, which is not part of the session.
+        topics = [t for t in gripper_topics(config.names) if not t.endswith('/rigidity')]
         recorder = McapRecorder(parameter_overrides=[
             Parameter('output_path', value=str(mcap_path)), Parameter('overwrite', value=True),
             Parameter('topics', value=topics), Parameter('discovery_period_s', value=0.2),
