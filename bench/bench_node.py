@@ -1,0 +1,307 @@
+"""Benchmark of the model node: pressure-to-shape latency and the highest sustained input rate."""
+
+# Run inside the private network namespace:
+#   scripts/isolated .venv/bin/python bench/bench_node.py
+# The model node runs in its own process (python -m fpc_gripper.nodes.model_node); this
+# process publishes stamped finger_<i>/pressure_command messages for three fingers and
+# receives finger_<i>/shape serialized (no Python message objects on the receiving side),
+# reading the header stamp, which the node copies from the command it answers.
+# Latency = receipt - command stamp, both on the system clock. The sustained rate is the
+# highest per-finger input rate of a ladder at which >= KEEP_UP of the commands get their own
+# shape, measured with the rate cap lifted (max_rate_hz 10000). Writes bench/results/node.json
+# and prints a table.
+
+import argparse
+import json
+import math
+import os
+import pathlib
+import signal
+import statistics
+import struct
+import subprocess
+import sys
+import threading
+import time
+
+import numpy as np
+
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
+from timing import machine, median_time  # noqa: E402
+
+from nav_msgs.msg import Path  # noqa: E402
+import rclpy  # noqa: E402
+from rclpy.context import Context  # noqa: E402
+from rclpy.executors import SingleThreadedExecutor  # noqa: E402
+from rclpy.qos import QoSProfile, ReliabilityPolicy  # noqa: E402
+from sensor_msgs.msg import FluidPressure  # noqa: E402
+
+from fpc_gripper.io.config import load_gripper_config  # noqa: E402
+from fpc_gripper.io.messages import serialized_shape  # noqa: E402
+from fpc_gripper.model import CCMSolver  # noqa: E402
+
+RESULTS = pathlib.Path(__file__).resolve().parent / 'results' / 'node.json'
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+#: Issue targets: latency at 100 Hz input on 3 fingers [ms], and the sustained rate [Hz].
+TARGETS = {'p50_ms': 5.0, 'p99_ms': 20.0, 'sustained_hz': 200.0}
+FINGERS = ('finger_0', 'finger_1', 'finger_2')
+ATM = 101325.0
+#: Output/input ratio below which the node has fallen behind.
+KEEP_UP = 0.95
+#: Commands as the conventions say (reliable, depth 10).
+COMMAND_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+#: The shape sink keeps a deep queue: with depth 10 this Python process, not the node, was
+#: the first to fall behind (its own reader overflowed) at a few hundred messages per second.
+SINK_QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
+
+
+def command_gauge(tick, finger, mode):
+    """Gauge pressure of a command [Pa]: a sweep, so that every command needs a solve."""
+    gauge = 150e3 + 100e3 * math.sin(2.0 * math.pi * tick / 97.0)
+    return gauge + (7e3 * finger if mode == 'distinct' else 0.0)
+
+
+class ModelProcess:
+    """The model node in a child process, in its own namespace."""
+
+    def __init__(self, namespace, max_rate_hz):
+        self.namespace = namespace
+        self.process = subprocess.Popen(
+            [sys.executable, '-m', 'fpc_gripper.nodes.model_node', '--ros-args',
+             '-r', f'__ns:={namespace}', '-p', f'max_rate_hz:={float(max_rate_hz)}'],
+            cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+
+    def cpu_s(self):
+        """CPU time of the node process so far, user + system [s]."""
+        fields = pathlib.Path(f'/proc/{self.process.pid}/stat').read_text().rsplit(')', 1)[1]
+        utime, stime = fields.split()[11:13]
+        return (int(utime) + int(stime)) / os.sysconf('SC_CLK_TCK')
+
+    def stop(self):
+        self.process.send_signal(signal.SIGINT)
+        try:
+            _, err = self.process.communicate(timeout=20)
+        except subprocess.TimeoutExpired:
+            self.process.kill()
+            _, err = self.process.communicate()
+        if self.process.returncode != 0:
+            print(f'model node exited with {self.process.returncode}:\n{err[-2000:]}',
+                  file=sys.stderr)
+
+
+class Driver:
+    """Publishes stamped commands and records (stamp, receipt) of every shape."""
+
+    def __init__(self, context, namespace):
+        self.node = rclpy.create_node(f'bench_driver{namespace.replace("/", "_")}',
+                                      context=context)
+        self.pubs = [self.node.create_publisher(FluidPressure,
+                                                f'{namespace}/{f}/pressure_command',
+                                                COMMAND_QOS)
+                     for f in FINGERS]
+        self.received = [[] for _ in FINGERS]
+        for i, f in enumerate(FINGERS):
+            self.node.create_subscription(Path, f'{namespace}/{f}/shape',
+                                          self._recorder(self.received[i]), SINK_QOS,
+                                          raw=True)
+
+    @staticmethod
+    def _recorder(store):
+        def record(data):
+            now = time.time_ns()
+            sec, nanosec = struct.unpack_from('<iI', data, 4)
+            store.append((sec * 1_000_000_000 + nanosec, now))
+        return record
+
+    def wait_for_initial_state(self, timeout=60.0):
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if all(self.received):
+                return True
+            time.sleep(0.05)
+        return False
+
+    def drive(self, rate_hz, duration_s, mode, tick0=0):
+        """Publish one command per finger per period; return the stamps sent per finger."""
+        msgs = [FluidPressure() for _ in FINGERS]
+        sent = [[] for _ in FINGERS]
+        period = 1.0 / rate_hz
+        ticks = int(round(rate_hz * duration_s))
+        start = time.perf_counter()
+        for k in range(ticks):
+            target = start + k * period
+            delay = target - time.perf_counter()
+            if delay > 0:
+                time.sleep(delay)
+            for i, (pub, msg) in enumerate(zip(self.pubs, msgs)):
+                stamp = time.time_ns()
+                msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp, 1_000_000_000)
+                msg.fluid_pressure = ATM + command_gauge(tick0 + k, i, mode)
+                pub.publish(msg)
+                sent[i].append(stamp)
+        elapsed = time.perf_counter() - start
+        return sent, elapsed
+
+    def window(self, sent, drain_s=0.5):
+        """Latencies [ms] and output/input ratio of the commands in `sent`."""
+        time.sleep(drain_s)
+        latencies, ratios = [], []
+        for i, stamps in enumerate(sent):
+            first, last = stamps[0], stamps[-1]
+            got = [(s, r) for s, r in list(self.received[i]) if first <= s <= last]
+            latencies.extend((r - s) * 1e-6 for s, r in got)
+            ratios.append(len(got) / len(stamps))
+        return np.array(latencies), min(ratios)
+
+
+def baseline_ms():
+    """In-process work per finger, same run: warm solve + samples + circle fit + Path bytes."""
+    design = load_gripper_config().fingers[0].design
+    solver = CCMSolver(design)
+    state = {'r': solver.solve(150e3), 'k': 0}
+
+    def step():
+        state['k'] += 1
+        r = solver.solve(command_gauge(state['k'], 0, 'same'), initial=state['r'])
+        serialized_shape(r, 'finger_0', 0)
+        float(r.curvature)
+        state['r'] = r
+
+    return median_time(step, repeats=200) * 1e3
+
+
+def measured_drive(driver, model, rate_hz, duration_s, mode, tick0=0):
+    """Drive and also return the CPU fractions (of one core) of the node and this process."""
+    node0, own0 = model.cpu_s(), time.process_time()
+    sent, elapsed = driver.drive(rate_hz, duration_s, mode, tick0=tick0)
+    cpu = {'node_cpu': (model.cpu_s() - node0) / elapsed,
+           'bench_cpu': (time.process_time() - own0) / elapsed}
+    return sent, elapsed, cpu
+
+
+def latency_run(driver, model, mode, rate_hz, duration_s, repeats):
+    rows = []
+    tick = 0
+    for _ in range(repeats):
+        sent, elapsed, cpu = measured_drive(driver, model, rate_hz, duration_s, mode, tick)
+        tick += len(sent[0])
+        lat, ratio = driver.window(sent)
+        rows.append({'p50_ms': float(np.percentile(lat, 50)),
+                     'p99_ms': float(np.percentile(lat, 99)),
+                     'max_ms': float(lat.max()), 'samples': int(lat.size),
+                     'output_ratio': ratio, 'input_hz': len(sent[0]) / elapsed, **cpu})
+    return {
+        'mode': mode, 'rate_hz': rate_hz, 'duration_s': duration_s, 'repeats': rows,
+        'p50_ms': statistics.median(r['p50_ms'] for r in rows),
+        'p99_ms': statistics.median(r['p99_ms'] for r in rows),
+        'output_ratio': statistics.median(r['output_ratio'] for r in rows),
+        'node_cpu': statistics.median(r['node_cpu'] for r in rows),
+    }
+
+
+def ladder_run(driver, model, mode, rates, duration_s):
+    steps = []
+    best = 0.0
+    for rate in rates:
+        sent, elapsed, cpu = measured_drive(driver, model, rate, duration_s, mode)
+        lat, ratio = driver.window(sent)
+        achieved = len(sent[0]) / elapsed
+        steps.append({'rate_hz': rate, 'input_hz': achieved, 'output_ratio': ratio, **cpu,
+                      'p50_ms': float(np.percentile(lat, 50)) if lat.size else None,
+                      'p99_ms': float(np.percentile(lat, 99)) if lat.size else None})
+        if ratio < KEEP_UP or achieved < KEEP_UP * rate:
+            break
+        best = rate
+    return best, steps
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument('--repeats', type=int, default=3)
+    parser.add_argument('--duration', type=float, default=4.0,
+                        help='seconds per latency repeat')
+    parser.add_argument('--step', type=float, default=2.0, help='seconds per ladder step')
+    parser.add_argument('--rates', type=float, nargs='+',
+                        default=[100, 200, 300, 400, 500, 600, 800])
+    parser.add_argument('--output', type=pathlib.Path, default=RESULTS)
+    args = parser.parse_args(argv)
+    if os.environ.get('FPC_NETNS') != '1':
+        parser.error('run inside the private namespace: scripts/isolated .venv/bin/python '
+                     'bench/bench_node.py')
+
+    base = baseline_ms()
+    context = Context()
+    rclpy.init(context=context)
+    executor = SingleThreadedExecutor(context=context)
+    spinner = threading.Thread(target=executor.spin, daemon=True)
+    spinner.start()
+    results = {'machine': machine(), 'targets': TARGETS, 'baseline_ms': base,
+               'fingers': len(FINGERS), 'keep_up_ratio': KEEP_UP,
+               'modes': {'same': 'one command value for all three fingers (one shared solve)',
+                         'distinct': 'a different value per finger (three solves)'},
+               'load_average': os.getloadavg()}
+    try:
+        # Latency: the node as shipped (max_rate_hz 200), 100 Hz per finger.
+        model = ModelProcess('/bench_latency', 200.0)
+        driver = Driver(context, '/bench_latency')
+        executor.add_node(driver.node)
+        try:
+            if not driver.wait_for_initial_state():
+                raise RuntimeError('the model node published no initial state')
+            driver.drive(100.0, 1.0, 'same')  # warm-up
+            results['latency'] = {
+                mode: latency_run(driver, model, mode, 100.0, args.duration, args.repeats)
+                for mode in ('same', 'distinct')}
+            # With the default cap, the node keeps up with commands at the cap itself.
+            results['at_default_cap'] = latency_run(driver, model, 'distinct', 200.0, args.step,
+                                                    1)
+        finally:
+            model.stop()
+        # Throughput: lift the cap to find what the node itself sustains.
+        model = ModelProcess('/bench_rate', 10000.0)
+        driver = Driver(context, '/bench_rate')
+        executor.add_node(driver.node)
+        try:
+            if not driver.wait_for_initial_state():
+                raise RuntimeError('the model node published no initial state')
+            driver.drive(100.0, 1.0, 'same')
+            ladders = {}
+            for mode in ('same', 'distinct'):
+                runs = [ladder_run(driver, model, mode, args.rates, args.step)
+                        for _ in range(args.repeats)]
+                ladders[mode] = {'sustained_hz': statistics.median(b for b, _ in runs),
+                                 'runs': [s for _, s in runs]}
+            results['sustained'] = ladders
+        finally:
+            model.stop()
+    finally:
+        executor.shutdown(timeout_sec=5.0)
+        spinner.join(timeout=5.0)
+        context.try_shutdown()
+
+    lat = results['latency']
+    results['meets'] = {
+        'p50_ms': all(lat[m]['p50_ms'] <= TARGETS['p50_ms'] for m in lat),
+        'p99_ms': all(lat[m]['p99_ms'] <= TARGETS['p99_ms'] for m in lat),
+        'sustained_hz': all(results['sustained'][m]['sustained_hz'] >= TARGETS['sustained_hz']
+                            for m in results['sustained']),
+    }
+    args.output.parent.mkdir(parents=True, exist_ok=True)
+    args.output.write_text(json.dumps(results, indent=2) + '\n')
+
+    print(f'baseline (in-process warm solve + samples + fit + Path bytes): {base:.2f} ms')
+    print(f'{"commands":<28}{"p50 [ms]":>10}{"p99 [ms]":>10}{"out/in":>8}{"node CPU":>10}')
+    rows = [(f'100 Hz x 3, {mode}', row) for mode, row in lat.items()]
+    rows.append(('200 Hz x 3, distinct, cap', results['at_default_cap']))
+    for label, row in rows:
+        print(f'{label:<28}{row["p50_ms"]:>10.2f}{row["p99_ms"]:>10.2f}'
+              f'{row["output_ratio"]:>8.2f}{row["node_cpu"]:>10.2f}')
+    for mode, row in results['sustained'].items():
+        print(f'sustained per finger, 3 fingers, {mode}: {row["sustained_hz"]:.0f} Hz')
+    print(f'targets {TARGETS}; met {results["meets"]}; p50/baseline '
+          f'{lat["same"]["p50_ms"] / base:.1f}')
+    print(f'wrote {args.output}')
+
+
+if __name__ == '__main__':
+    main()

@@ -1,0 +1,737 @@
+"""ROS-free state of the model node: input checks, latest-wins coalescing, shared warm solves."""
+
+import dataclasses
+import enum
+import math
+import time
+
+import numpy as np
+
+__all__ = ['RATE_BURST', 'RIGIDITY_DISPLACEMENT', 'FingerState', 'FingerStatus', 'InputCheck',
+           'Level', 'ModelCore', 'Rejection', 'Update', 'check_pressure', 'check_tip_force',
+           'stale_detail']
+
+#: Capacity of each finger's solve-rate token bucket: sustained rate <= max_rate_hz, bursts
+#: of at most this many back-to-back solves [solves].
+RATE_BURST = 2.0
+#: Tip displacement of the rigidity computation, eq. (22) [m].
+RIGIDITY_DISPLACEMENT = 0.010
+_SOLVER_ERRORS = (ValueError, TypeError, ArithmeticError, np.linalg.LinAlgError)
+_RIGIDITY_CACHE = 64
+# Round-off allowance of the token count (refills are sums of small increments).
+_TOKEN_SLACK = 1e-9
+
+
+class Rejection(enum.Enum):
+    """Why an input message was ignored."""
+
+    NOT_FINITE = 'not finite'
+    BELOW_VACUUM = 'below vacuum'
+    OVER_LIMIT = 'over the pressure limit'
+    WRONG_FRAME = 'wrong frame'
+    STALE = 'stale'
+
+
+class Level(enum.IntEnum):
+    """Health of one finger; the values are those of diagnostic_msgs/DiagnosticStatus."""
+
+    OK = 0
+    WARN = 1
+    ERROR = 2
+
+
+@dataclasses.dataclass(frozen=True)
+class InputCheck:
+    """
+    Outcome of checking one input message.
+
+    Attributes
+    ----------
+    value : float or tuple of float
+        Gauge pressure [Pa] or tip force (f0, p0) [N]; meaningful when accepted.
+    rejection : Rejection or None
+        None when the input is accepted.
+    detail : str
+        What was wrong, with values and units ('' when accepted).
+    clamped : bool
+        A gauge pressure below atmosphere was raised to 0 Pa.
+
+    """
+
+    value: object
+    rejection: Rejection = None
+    detail: str = ''
+    clamped: bool = False
+
+    @property
+    def accepted(self):
+        """True when the input may be used."""
+        return self.rejection is None
+
+
+def stale_detail(stamp_ns, now_ns, stale_after_s):
+    """
+    Explain why a header stamp is stale, or return None when it is not.
+
+    A zero stamp (an unstamped message) and a zero `now_ns` (a simulated clock that has not
+    started) carry no age and are never stale; stamps in the future are not stale either.
+
+    Parameters
+    ----------
+    stamp_ns : int
+        Header stamp [ns].
+    now_ns : int
+        Current time of the node clock [ns].
+    stale_after_s : float
+        Largest accepted age [s]; 0 disables the check.
+
+    Returns
+    -------
+    str or None
+
+    """
+    if stale_after_s <= 0.0 or stamp_ns == 0 or now_ns <= 0:
+        return None
+    age = (now_ns - stamp_ns) * 1e-9
+    if age <= stale_after_s:
+        return None
+    return f'header stamp is {age:.3f} s old, more than stale_after_s = {stale_after_s:g} s'
+
+
+def check_pressure(absolute, *, atmospheric_pressure, max_pressure, stamp_ns=0, now_ns=0,
+                   stale_after_s=0.0):
+    """
+    Check an absolute pressure message and convert it to gauge.
+
+    Parameters
+    ----------
+    absolute : float
+        ``sensor_msgs/FluidPressure.fluid_pressure``, absolute [Pa].
+    atmospheric_pressure : float
+        Gauge reference [Pa].
+    max_pressure : float
+        Largest accepted gauge pressure [Pa]; exactly the limit is accepted.
+    stamp_ns, now_ns : int
+        Header stamp and node clock [ns], see `stale_detail`.
+    stale_after_s : float
+        Largest accepted age [s]; 0 disables the check.
+
+    Returns
+    -------
+    InputCheck
+        ``value`` is the gauge pressure [Pa]. Absolute pressures between vacuum and
+        atmosphere are accepted and clamped to 0 Pa gauge (``clamped`` True): the model
+        covers inflation only, and a vented channel reads a little below atmosphere.
+
+    """
+    absolute = float(absolute)
+    if not math.isfinite(absolute):
+        return InputCheck(absolute, Rejection.NOT_FINITE,
+                          f'fluid_pressure {absolute} Pa is not finite')
+    if absolute < 0.0:
+        return InputCheck(absolute, Rejection.BELOW_VACUUM,
+                          f'fluid_pressure {absolute:.1f} Pa absolute is below vacuum')
+    gauge = absolute - float(atmospheric_pressure)
+    if gauge > max_pressure:
+        return InputCheck(gauge, Rejection.OVER_LIMIT,
+                          f'fluid_pressure {absolute:.1f} Pa absolute is {gauge:.1f} Pa gauge, '
+                          f'over the limit {max_pressure:.1f} Pa gauge')
+    stale = stale_detail(stamp_ns, now_ns, stale_after_s)
+    if stale is not None:
+        return InputCheck(gauge, Rejection.STALE, stale)
+    if gauge < 0.0:
+        return InputCheck(0.0, clamped=True)
+    return InputCheck(gauge)
+
+
+def check_tip_force(f0, p0, frame_id, *, expected_frame, stamp_ns=0, now_ns=0,
+                    stale_after_s=0.0):
+    """
+    Check a tip force message.
+
+    Parameters
+    ----------
+    f0, p0 : float
+        Force along the finger's X and Z axes [N].
+    frame_id : str
+        Header frame; must equal `expected_frame`. An empty frame is rejected too: the
+        components mean nothing without their frame.
+    expected_frame : str
+        The finger frame, ``finger_<i>``.
+    stamp_ns, now_ns : int
+        Header stamp and node clock [ns], see `stale_detail`.
+    stale_after_s : float
+        Largest accepted age [s]; 0 disables the check.
+
+    Returns
+    -------
+    InputCheck
+        ``value`` is (f0, p0) [N].
+
+    """
+    force = (float(f0), float(p0))
+    if not all(math.isfinite(f) for f in force):
+        return InputCheck(force, Rejection.NOT_FINITE,
+                          f'force (x, z) = ({force[0]}, {force[1]}) N is not finite')
+    if frame_id != expected_frame:
+        return InputCheck(force, Rejection.WRONG_FRAME,
+                          f'frame_id {frame_id!r} is not {expected_frame!r}')
+    stale = stale_detail(stamp_ns, now_ns, stale_after_s)
+    if stale is not None:
+        return InputCheck(force, Rejection.STALE, stale)
+    return InputCheck(force)
+
+
+@dataclasses.dataclass(eq=False)
+class FingerState:
+    """
+    Inputs, last good state and counters of one finger.
+
+    Attributes
+    ----------
+    name : str
+        Finger name and frame, ``finger_<i>``.
+    design : ActuatorDesign
+        The finger's design.
+    max_pressure : float
+        Largest accepted gauge pressure [Pa].
+    solver : object
+        The finger's solver (shared by fingers of equal design).
+    gauge : float
+        Newest accepted gauge pressure [Pa].
+    tip_force : tuple of float
+        Newest accepted (f0, p0) [N].
+    stamp_ns : int
+        Stamp given to the next update [ns]: the newest accepted input's, else its arrival.
+    pending : bool
+        Accepted input not yet solved.
+    result : CCMResult or None
+        Last good state (successful solve), the one published.
+    result_key : tuple or None
+        `key` of the input `result` answers (its solver first).
+    result_stamp_ns : int
+        Stamp of `result` [ns].
+    failure : str or None
+        Message of the solve that failed for the current input, cleared by a success.
+    rejection : Rejection or None
+        Kind of the last rejected input; cleared by the next accepted one.
+    last_rejection : str
+        Topic and detail of the last rejection ('none' before any).
+
+    """
+
+    name: str
+    design: object
+    max_pressure: float
+    solver: object = None
+    gauge: float = 0.0
+    tip_force: tuple = (0.0, 0.0)
+    stamp_ns: int = 0
+    pending: bool = True
+    result: object = None
+    result_key: tuple = None
+    result_stamp_ns: int = 0
+    failure: str = None
+    rejection: Rejection = None
+    last_rejection: str = 'none'
+    rejected: int = 0
+    clamped: int = 0
+    coalesced: int = 0
+    solves: int = 0
+    shared: int = 0
+    failures: int = 0
+    iterations: int = 0
+    solve_time_s: float = 0.0
+    tokens: float = RATE_BURST
+    tokens_ns: int = None
+    failed: tuple = None
+
+    @property
+    def key(self):
+        """Identity of the current input: (solver, gauge [Pa], f0 [N], p0 [N])."""
+        return (self.solver, self.gauge) + tuple(self.tip_force)
+
+
+@dataclasses.dataclass(frozen=True)
+class Update:
+    """
+    What one `ModelCore.process` did for one finger.
+
+    Attributes
+    ----------
+    index : int
+        Finger index.
+    result : CCMResult or None
+        New good state to publish; None when the solve failed (publish nothing).
+    stamp_ns : int
+        Stamp of the new state [ns].
+    solved : bool
+        This finger's update ran the solver (False: it reused an identical state).
+    failure : str or None
+        Solver message when it failed.
+
+    """
+
+    index: int
+    result: object
+    stamp_ns: int
+    solved: bool
+    failure: str = None
+
+
+@dataclasses.dataclass(frozen=True)
+class FingerStatus:
+    """Diagnostic summary of one finger: level, message and key values (strings)."""
+
+    level: Level
+    message: str
+    values: dict
+
+
+def _real_in_range(name, value, low, high, unit):
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise TypeError(f'`{name}` must be a real number {unit}, got {value!r}')
+    value = float(value)
+    if not (math.isfinite(value) and low <= value <= high):
+        raise ValueError(f'`{name}` must be in [{low:g}, {high:g}] {unit}, got {value}')
+    return value
+
+
+class ModelCore:
+    """
+    Per-finger model state machine of the model node, free of ROS.
+
+    Inputs are checked and stored (the newest wins; an input that replaces a pending one
+    is counted as coalesced), then `process` solves pending fingers: fingers with the same
+    solver (same design and settings), gauge pressure and tip force share one solve, a
+    finger whose input equals a state some finger already holds reuses that state, and
+    every solve is warm-started from the finger's last good result. A failed solve keeps
+    the last good state. Solve rate is limited per finger by a token bucket.
+
+    Parameters
+    ----------
+    fingers : iterable of (str, ActuatorDesign)
+        Finger names (frames) and designs, in index order.
+    solver_factory : callable
+        ``solver_factory(design)`` returns a solver with ``solve(pressure, tip_force,
+        initial)`` and ``rigidity(pressure, axis, displacement, initial)`` like
+        :class:`~fpc_gripper.model.CCMSolver`; called once per distinct design.
+    max_pressure : float
+        Gauge limit on top of each design's ``max_pressure`` [Pa].
+    atmospheric_pressure : float
+        Gauge reference [Pa].
+    stale_after_s : float
+        Largest accepted age of a header stamp [s]; 0 disables.
+    max_rate_hz : float
+        Sustained solve-rate cap per finger [Hz].
+    timer : callable
+        Monotonic seconds for solve timing.
+
+    """
+
+    def __init__(self, fingers, solver_factory, *, max_pressure=math.inf,
+                 atmospheric_pressure=101325.0, stale_after_s=0.0, max_rate_hz=200.0,
+                 timer=time.perf_counter):
+        self._states = tuple(
+            FingerState(name=name, design=design,
+                        max_pressure=min(float(design.max_pressure), float(max_pressure)))
+            for name, design in fingers)
+        if not self._states:
+            raise ValueError('`fingers` must name at least one finger, got none')
+        self._names = tuple(s.name for s in self._states)
+        self.atmospheric_pressure = atmospheric_pressure
+        self.stale_after_s = stale_after_s
+        self.max_rate_hz = max_rate_hz
+        self._timer = timer
+        self._rigidity = {}
+        self.rebuild(solver_factory)
+
+    # -- settings ---------------------------------------------------------------------------
+
+    @property
+    def atmospheric_pressure(self):
+        """Gauge reference [Pa]."""
+        return self._atmospheric_pressure
+
+    @atmospheric_pressure.setter
+    def atmospheric_pressure(self, value):
+        self._atmospheric_pressure = _real_in_range(
+            'atmospheric_pressure', value, 0.0, math.inf, '[Pa]')
+
+    @property
+    def stale_after_s(self):
+        """Largest accepted stamp age [s]; 0 disables the check."""
+        return self._stale_after_s
+
+    @stale_after_s.setter
+    def stale_after_s(self, value):
+        self._stale_after_s = _real_in_range('stale_after_s', value, 0.0, math.inf, '[s]')
+
+    @property
+    def max_rate_hz(self):
+        """Sustained solve-rate cap per finger [Hz]."""
+        return self._max_rate_hz
+
+    @max_rate_hz.setter
+    def max_rate_hz(self, value):
+        value = _real_in_range('max_rate_hz', value, 0.0, math.inf, '[Hz]')
+        if value <= 0.0:
+            raise ValueError(f'`max_rate_hz` must be > 0 [Hz], got {value}')
+        self._max_rate_hz = value
+
+    @property
+    def fingers(self):
+        """The per-finger states, in index order."""
+        return self._states
+
+    @property
+    def names(self):
+        """Finger names in index order."""
+        return self._names
+
+    def rebuild(self, solver_factory):
+        """
+        Build new solvers (one per distinct design) and mark every finger pending.
+
+        The last good states stay published until the new solves succeed; they warm-start
+        nothing, since their segmentation may differ.
+
+        Parameters
+        ----------
+        solver_factory : callable
+            ``solver_factory(design)``, see the class.
+
+        """
+        solvers = {}
+        for state in self._states:
+            if state.design not in solvers:
+                solvers[state.design] = solver_factory(state.design)
+            state.solver = solvers[state.design]
+            state.pending = True
+            state.failed = None
+        self._rigidity.clear()
+
+    # -- inputs -----------------------------------------------------------------------------
+
+    def offer_pressure(self, index, absolute, stamp_ns=0, now_ns=0, source='pressure_command'):
+        """
+        Check an absolute pressure input of a finger and make it pending when accepted.
+
+        Parameters
+        ----------
+        index : int
+            Finger index.
+        absolute : float
+            Absolute pressure [Pa].
+        stamp_ns : int
+            Header stamp [ns]; 0 when unstamped.
+        now_ns : int
+            Node clock [ns].
+        source : str
+            Topic name for the rejection text.
+
+        Returns
+        -------
+        InputCheck
+
+        """
+        state = self._states[index]
+        check = check_pressure(absolute, atmospheric_pressure=self._atmospheric_pressure,
+                               max_pressure=state.max_pressure, stamp_ns=stamp_ns,
+                               now_ns=now_ns, stale_after_s=self._stale_after_s)
+        if self._record(state, check, source, stamp_ns, now_ns):
+            state.gauge = check.value
+            state.clamped += check.clamped
+        return check
+
+    def offer_tip_force(self, index, f0, p0, frame_id, stamp_ns=0, now_ns=0,
+                        source='tip_force'):
+        """
+        Check a tip force input of a finger and make it pending when accepted.
+
+        Parameters
+        ----------
+        index : int
+            Finger index.
+        f0, p0 : float
+            Force along the finger's X and Z [N].
+        frame_id : str
+            Header frame; must be the finger's name.
+        stamp_ns : int
+            Header stamp [ns]; 0 when unstamped.
+        now_ns : int
+            Node clock [ns].
+        source : str
+            Topic name for the rejection text.
+
+        Returns
+        -------
+        InputCheck
+
+        """
+        state = self._states[index]
+        check = check_tip_force(f0, p0, frame_id, expected_frame=state.name,
+                                stamp_ns=stamp_ns, now_ns=now_ns,
+                                stale_after_s=self._stale_after_s)
+        if self._record(state, check, source, stamp_ns, now_ns):
+            state.tip_force = check.value
+        return check
+
+    def _record(self, state, check, source, stamp_ns, now_ns):
+        if not check.accepted:
+            state.rejection = check.rejection
+            state.last_rejection = f'{source}: {check.detail}'
+            state.rejected += 1
+            return False
+        state.rejection = None
+        state.coalesced += state.pending
+        state.pending = True
+        state.stamp_ns = int(stamp_ns) if stamp_ns else int(now_ns)
+        return True
+
+    # -- solving ----------------------------------------------------------------------------
+
+    def _refill(self, state, now_ns):
+        if state.tokens_ns is not None:
+            gained = max(0, now_ns - state.tokens_ns) * 1e-9 * self._max_rate_hz
+            state.tokens = min(RATE_BURST, state.tokens + gained)
+        state.tokens_ns = now_ns
+
+    def ready(self, now_ns):
+        """
+        Indices of the fingers with pending input and solve budget left.
+
+        Parameters
+        ----------
+        now_ns : int
+            Monotonic or node-clock time [ns], the same clock for every call.
+
+        Returns
+        -------
+        tuple of int
+
+        """
+        out = []
+        for i, state in enumerate(self._states):
+            if state.pending:
+                self._refill(state, now_ns)
+                if state.tokens >= 1.0 - _TOKEN_SLACK:
+                    out.append(i)
+        return tuple(out)
+
+    @property
+    def pending(self):
+        """True while any finger has input waiting."""
+        return any(s.pending for s in self._states)
+
+    def process(self, indices, now_ns):
+        """
+        Solve the pending input of the given fingers (sharing identical solves).
+
+        Each finger spends one token of its rate budget, even when forced past an empty
+        bucket (then it waits longer for the next solve).
+
+        Parameters
+        ----------
+        indices : iterable of int
+            Fingers to process; those without pending input are skipped.
+        now_ns : int
+            Time for the rate budget [ns].
+
+        Returns
+        -------
+        list of Update
+            One per processed finger, in order of first appearance.
+
+        """
+        groups = {}
+        for i in indices:
+            state = self._states[i]
+            if not state.pending:
+                continue
+            self._refill(state, now_ns)
+            state.tokens -= 1.0
+            state.pending = False
+            groups.setdefault(state.key, []).append(i)
+        updates = []
+        for key, members in groups.items():
+            updates.extend(self._solve_group(key, members))
+        return updates
+
+    def _known(self, key):
+        for state in self._states:
+            if state.result_key == key:
+                return state.result
+        return None
+
+    def _solve_group(self, key, members):
+        solver, gauge = key[0], key[1]
+        force = key[2:]
+        lead = self._states[members[0]]
+        result = self._known(key)
+        solved_by = None
+        failure = None
+        elapsed = 0.0
+        if result is None:
+            warm = lead.result if lead.result_key is not None and lead.result_key[0] is solver \
+                else None
+            if lead.failed is not None and lead.failed[0] == key and lead.failed[1] is warm:
+                # Same input, same warm start: the solver is deterministic, so it would
+                # fail again; do not spend the time.
+                failure = lead.failed[2]
+            else:
+                start = self._timer()
+                try:
+                    candidate = solver.solve(gauge, force, initial=warm)
+                    ok = bool(candidate.success)
+                    message = str(candidate.message)
+                except _SOLVER_ERRORS as exc:
+                    candidate, ok = None, False
+                    message = f'solver raised {type(exc).__name__}: {exc}'
+                elapsed = self._timer() - start
+                if ok:
+                    result, solved_by = candidate, members[0]
+                else:
+                    failure = message
+                for i in members:
+                    self._states[i].failed = None if ok else (key, warm, message)
+        updates = []
+        for i in members:
+            state = self._states[i]
+            if result is None:
+                state.failure = failure
+                state.failures += 1
+                updates.append(Update(i, None, state.stamp_ns, False, failure))
+                continue
+            solved = i == solved_by
+            state.result = result
+            state.result_key = key
+            state.result_stamp_ns = state.stamp_ns
+            state.failure = None
+            state.iterations = result.iterations if solved else 0
+            state.solve_time_s = elapsed if solved else 0.0
+            state.solves += solved
+            state.shared += not solved
+            updates.append(Update(i, result, state.stamp_ns, solved))
+        return updates
+
+    def rigidity(self, index, axis):
+        """
+        Flexural rigidity of a finger's last good state along an axis, cached.
+
+        Computed at the state's gauge pressure, unloaded (eq. 22), with the solver's
+        ``rigidity``, warm-started from the state; fingers sharing a solver and pressure
+        share the computation.
+
+        Parameters
+        ----------
+        index : int
+            Finger index.
+        axis : {'x', 'z'}
+            Load and displacement direction.
+
+        Returns
+        -------
+        RigidityResult or None
+            None before any good state, or when the computation raised.
+
+        """
+        state = self._states[index]
+        if state.result is None:
+            return None
+        solver, gauge = state.result_key[:2]
+        key = (solver, gauge, axis)
+        if key not in self._rigidity:
+            if len(self._rigidity) >= _RIGIDITY_CACHE:
+                self._rigidity.clear()
+            try:
+                value = solver.rigidity(gauge, axis=axis,
+                                        displacement=RIGIDITY_DISPLACEMENT,
+                                        initial=state.result)
+            except _SOLVER_ERRORS:
+                value = None
+            self._rigidity[key] = value
+        return self._rigidity[key]
+
+    # -- health -----------------------------------------------------------------------------
+
+    def health(self, index):
+        """
+        Level of a finger and the kind of its problem, without derived values (cheap).
+
+        ERROR while the newest input's solve failed, WARN after a rejected input (until
+        the next accepted one) or while the published state breaks the small-rotation
+        rule (valid=False), OK otherwise.
+
+        Parameters
+        ----------
+        index : int
+            Finger index.
+
+        Returns
+        -------
+        tuple
+            ``(level, failed, rejection, valid)``: it changes when the kind of problem
+            changes, not when only its values do.
+
+        """
+        state = self._states[index]
+        valid = None if state.result is None else bool(state.result.valid)
+        failed = state.failure is not None
+        if failed:
+            level = Level.ERROR
+        elif state.rejection is not None or valid is False:
+            level = Level.WARN
+        else:
+            level = Level.OK
+        return level, failed, state.rejection, valid
+
+    def status(self, index):
+        """
+        Summarise a finger's health for diagnostics, with key values.
+
+        Parameters
+        ----------
+        index : int
+            Finger index.
+
+        Returns
+        -------
+        FingerStatus
+            Level as in `health`; the message names every problem.
+
+        """
+        state = self._states[index]
+        result = state.result
+        level, failed, rejection, valid = self.health(index)
+        parts = []
+        if failed:
+            parts.append(f'solver failed, keeping the last good state: {state.failure}')
+        if rejection is not None:
+            parts.append(f'rejected {state.last_rejection}')
+        if valid is False:
+            parts.append('state breaks the small-rotation rule (valid=False)')
+        if result is None and state.failure is None:
+            parts.append('no state yet')
+        message = '; '.join(parts) if parts else 'ok'
+        pressure = 'none' if result is None else f'{state.result_key[1]:.1f}'
+        force = (0.0, 0.0) if result is None else state.result_key[2:]
+        values = {
+            'pressure_pa': pressure,
+            'tip_force': f'f0={force[0]:.6g} N, p0={force[1]:.6g} N',
+            'iterations': str(state.iterations),
+            'solve_time_ms': f'{state.solve_time_s * 1e3:.3f}',
+            'valid': str(valid),
+            'last_rejection': state.last_rejection,
+            'input_pressure_pa': f'{state.gauge:.1f}',
+            'input_tip_force': f'f0={state.tip_force[0]:.6g} N, p0={state.tip_force[1]:.6g} N',
+            'curvature_per_m': 'none' if result is None else f'{result.curvature:.6g}',
+            'solver_message': state.failure or ('none' if result is None else result.message),
+            'rejected': str(state.rejected),
+            'clamped_to_zero_gauge': str(state.clamped),
+            'coalesced': str(state.coalesced),
+            'solves': str(state.solves),
+            'shared': str(state.shared),
+            'failures': str(state.failures),
+        }
+        return FingerStatus(level, message, values)

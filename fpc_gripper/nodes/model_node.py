@@ -1,0 +1,509 @@
+"""Node that turns finger pressures and tip forces into CCM shapes, curvatures and rigidities."""
+
+import functools
+import math
+import threading
+import time
+
+from diagnostic_msgs.msg import DiagnosticArray
+from diagnostic_msgs.msg import DiagnosticStatus
+from diagnostic_msgs.msg import KeyValue
+from geometry_msgs.msg import Vector3Stamped
+from geometry_msgs.msg import WrenchStamped
+from nav_msgs.msg import Path
+from rcl_interfaces.msg import FloatingPointRange
+from rcl_interfaces.msg import IntegerRange
+from rcl_interfaces.msg import ParameterDescriptor
+from rcl_interfaces.msg import SetParametersResult
+import rclpy
+from rclpy.clock import Clock
+from rclpy.clock import ClockType
+from rclpy.event_handler import PublisherEventCallbacks
+from rclpy.exceptions import ParameterException
+from rclpy.executors import ExternalShutdownException
+from rclpy.logging import get_logger
+from rclpy.node import Node
+from rclpy.qos import HistoryPolicy
+from rclpy.qos import qos_profile_sensor_data
+from rclpy.qos import QoSProfile
+from rclpy.qos import ReliabilityPolicy
+from rclpy.serialization import deserialize_message
+from sensor_msgs.msg import FluidPressure
+from std_msgs.msg import Float64
+from visualization_msgs.msg import MarkerArray
+
+from fpc_gripper.io.config import default_gripper_config_path
+from fpc_gripper.io.config import load_gripper_config
+from fpc_gripper.io.messages import curvature_message
+from fpc_gripper.io.messages import ns_to_time
+from fpc_gripper.io.messages import rigidity_message
+from fpc_gripper.io.messages import serialized_shape
+from fpc_gripper.io.messages import shape_marker
+from fpc_gripper.io.messages import shape_message
+from fpc_gripper.io.messages import time_to_ns
+from fpc_gripper.model import CCMSolver
+from fpc_gripper.model import PRESSURE_MODELS
+from fpc_gripper.nodes.model_core import Level
+from fpc_gripper.nodes.model_core import ModelCore
+
+PRESSURE_INPUTS = ('command', 'measured')
+_CHOICES = {'pressure_model': tuple(PRESSURE_MODELS), 'pressure_input': PRESSURE_INPUTS}
+# Parameters whose change rebuilds the solvers.
+_SOLVER_PARAMETERS = ('n_segments', 'pressure_model')
+
+_OUTPUT_QOS = QoSProfile(depth=10, history=HistoryPolicy.KEEP_LAST,
+                         reliability=ReliabilityPolicy.RELIABLE)
+_COMMAND_QOS = _OUTPUT_QOS
+_THROTTLE_S = 2.0
+_DIAGNOSTICS_PERIOD_S = 1.0
+# Slow outputs, at most once per period and the last update always sent: markers are for
+# people, and rigidity (two displacement-controlled solves) must not hold up the shapes [s].
+_MARKER_PERIOD_S = 1.0 / 30.0
+_RIGIDITY_PERIOD_S = 0.1
+_LEVELS = {Level.OK: DiagnosticStatus.OK, Level.WARN: DiagnosticStatus.WARN,
+           Level.ERROR: DiagnosticStatus.ERROR}
+_VALID_COLOR = (0.1, 0.7, 0.2, 1.0)
+_INVALID_COLOR = (1.0, 0.55, 0.0, 1.0)
+
+
+def _float_range(low, high):
+    return [FloatingPointRange(from_value=float(low), to_value=float(high), step=0.0)]
+
+
+def _int_range(low, high):
+    return [IntegerRange(from_value=int(low), to_value=int(high), step=1)]
+
+
+class _SlowOutput:
+    """Fingers whose slow output is out of date, sent at most once per period."""
+
+    def __init__(self, period_s, publish):
+        self.period_ns = int(period_s * 1e9)
+        self.publish = publish
+        self.dirty = set()
+        self.last_ns = None
+
+    def due(self, now_ns):
+        """Whether a period has passed since the last send [ns]."""
+        return self.last_ns is None or now_ns - self.last_ns >= self.period_ns
+
+    def take(self, now_ns):
+        """Mark a send at `now_ns` [ns] and return the out-of-date finger indices."""
+        self.last_ns = now_ns
+        indices = sorted(self.dirty)
+        self.dirty.clear()
+        return indices
+
+
+def _parameter_table():
+    """Return ``(name, default, description, extra descriptor fields)`` of every parameter."""
+    return (
+        ('gripper_config', str(default_gripper_config_path()),
+         'Gripper YAML: one set of topics per finger, named and framed finger_<i>.',
+         {'read_only': True}),
+        ('n_segments', 8, 'Number N of CCM segments per finger; a change rebuilds the solvers.',
+         {'integer_range': _int_range(1, 64)}),
+        ('pressure_model', 'adiabatic',
+         "Pressure work: 'adiabatic' (k_p = 1/(gamma - 1), paper eq. 20) or 'isobaric' "
+         '(k_p = 1); a change rebuilds the solvers.',
+         {'additional_constraints': f'one of {list(PRESSURE_MODELS)}'}),
+        ('max_rate_hz', 200.0,
+         'Solve-rate cap per finger [Hz]; newer input replaces pending input (latest wins).',
+         {'floating_point_range': _float_range(1.0, 10000.0)}),
+        ('pressure_input', 'command',
+         "'command': finger_<i>/pressure_command (reliable); 'measured': finger_<i>/pressure "
+         '(sensor data QoS). Both absolute [Pa].',
+         {'read_only': True, 'additional_constraints': f'one of {list(PRESSURE_INPUTS)}'}),
+        ('atmospheric_pressure', 101325.0,
+         'Atmospheric pressure [Pa]: gauge = absolute - atmospheric_pressure.',
+         {'floating_point_range': _float_range(3.0e4, 1.2e5)}),
+        ('stale_after_s', 1.0,
+         'Inputs whose header stamp is older than this against the node clock are rejected '
+         '[s]; 0 disables. Unstamped (zero) headers are never stale.',
+         {'floating_point_range': _float_range(0.0, 3600.0)}),
+    )
+
+
+class ModelNode(Node):
+    """
+    Publish the CCM equilibrium of every finger of a gripper as its inputs change.
+
+    Per finger ``finger_<i>`` of the gripper config it subscribes ``pressure_command`` (or
+    ``pressure`` with ``pressure_input:=measured``; absolute [Pa]) and ``tip_force``
+    (frame ``finger_<i>``, force.x = f0, force.z = p0 [N]) and publishes ``shape``
+    (nav_msgs/Path) and, computed only while someone listens, ``curvature``
+    (std_msgs/Float64, [1/m]) and ``rigidity`` (x = K_x, z = K_z [N·m²], at most 10 Hz);
+    plus ``markers`` (at most 30 Hz, while someone listens) and ``/diagnostics`` (1 Hz and on
+    every change of a finger's level or kind of problem).
+
+    Bad inputs are rejected and a failed solve publishes nothing: each finger keeps its
+    last good state (see :class:`~fpc_gripper.nodes.model_core.ModelCore`). Outputs carry
+    the header stamp of the input they answer (its arrival time when unstamped). A new
+    subscriber to an output is sent the current state at once.
+
+    Parameters
+    ----------
+    node_name : str
+        Node name.
+    solver_factory : callable, optional
+        ``solver_factory(design, n_segments=..., pressure_model=...)``; default
+        :class:`~fpc_gripper.model.CCMSolver`. See `_create_solver`.
+    **kwargs
+        Passed to :class:`rclpy.node.Node` (namespace, parameter_overrides, context, ...).
+
+    Raises
+    ------
+    ValueError
+        On an unreadable gripper config or an invalid parameter value.
+    rclpy.exceptions.ParameterException
+        On a parameter override of the wrong type or out of its range.
+
+    """
+
+    def __init__(self, node_name='model_node', *, solver_factory=None, **kwargs):
+        super().__init__(node_name, **kwargs)
+        try:
+            self._set_up(solver_factory)
+        except Exception:
+            self.destroy_node()
+            raise
+
+    def _set_up(self, solver_factory):
+        for name, default, description, extra in _parameter_table():
+            self.declare_parameter(
+                name, default, ParameterDescriptor(description=description, **extra))
+        # Overrides bypass the on-set callback: check the starting values the same way.
+        result = self._validate_parameters([self.get_parameter(n)
+                                            for n, *_ in _parameter_table()])
+        if not result.successful:
+            raise ValueError(result.reason)
+        self._solver_factory = solver_factory or CCMSolver
+        self._lock = threading.RLock()
+        # Rate budget and timers run on steady time (time.monotonic_ns), so that they keep
+        # going while a simulated clock stands still; staleness uses the node clock.
+        self._steady = Clock(clock_type=ClockType.STEADY_TIME)
+        param = self.get_parameter
+        config = load_gripper_config(param('gripper_config').value)
+        if abs(param('atmospheric_pressure').value - config.atmospheric_pressure) > 1.0:
+            self.get_logger().info(
+                f'atmospheric_pressure parameter {param("atmospheric_pressure").value:.0f} Pa '
+                f'differs from the gripper config {config.atmospheric_pressure:.0f} Pa; '
+                'the parameter is used')
+        self._core = ModelCore(
+            [(f.name, f.design) for f in config.fingers], self._create_solver,
+            max_pressure=config.max_pressure,
+            atmospheric_pressure=param('atmospheric_pressure').value,
+            stale_after_s=param('stale_after_s').value,
+            max_rate_hz=param('max_rate_hz').value)
+        names = self._core.names
+        self._last_shape = [None] * len(names)
+        self._markers = _SlowOutput(_MARKER_PERIOD_S, self._publish_markers)
+        self._rigidities = _SlowOutput(_RIGIDITY_PERIOD_S, self._publish_rigidities)
+        self._last_kinds = None
+        self._last_log = {}
+        self._serialize_shapes = None
+        self._create_topics(names)
+        self._rate_timer = self.create_timer(1.0 / param('max_rate_hz').value, self._on_timer,
+                                             clock=self._steady)
+        self._rate_timer.cancel()
+        self._diagnostics_timer = self.create_timer(
+            _DIAGNOSTICS_PERIOD_S, functools.partial(self._publish_diagnostics, True),
+            clock=self._steady)
+        self.add_on_set_parameters_callback(self._validate_parameters)
+        self.add_post_set_parameters_callback(self._apply_parameters)
+        with self._lock:
+            self._run(range(len(names)))
+        self.get_logger().info(
+            f'ready: {len(names)} fingers ({", ".join(names)}), n_segments '
+            f'{param("n_segments").value}, {param("pressure_model").value} pressure model, '
+            f'input {self._pressure_topic}, max_rate_hz {param("max_rate_hz").value:g}')
+
+    # -- public helpers ---------------------------------------------------------------------
+
+    @property
+    def core(self):
+        """The ROS-free model state (:class:`~fpc_gripper.nodes.model_core.ModelCore`)."""
+        return self._core
+
+    @property
+    def finger_names(self):
+        """Finger names of the gripper config, in index order."""
+        return self._core.names
+
+    def _create_solver(self, design):
+        """
+        Build the solver of one design from the parameters (the single place solvers are made).
+
+        Parameters
+        ----------
+        design : ActuatorDesign
+            The finger design.
+
+        Returns
+        -------
+        CCMSolver
+            Or whatever the injected factory returns.
+
+        """
+        return self._solver_factory(design,
+                                    n_segments=self.get_parameter('n_segments').value,
+                                    pressure_model=self.get_parameter('pressure_model').value)
+
+    # -- set-up -----------------------------------------------------------------------------
+
+    def _create_topics(self, names):
+        def matched(kind, index=None):
+            return PublisherEventCallbacks(
+                matched=functools.partial(self._on_matched, kind, index))
+
+        self._shape_pubs = tuple(
+            self.create_publisher(Path, f'{name}/shape', _OUTPUT_QOS,
+                                  event_callbacks=matched('shape', i))
+            for i, name in enumerate(names))
+        self._curvature_pubs = tuple(
+            self.create_publisher(Float64, f'{name}/curvature', _OUTPUT_QOS,
+                                  event_callbacks=matched('curvature', i))
+            for i, name in enumerate(names))
+        self._rigidity_pubs = tuple(
+            self.create_publisher(Vector3Stamped, f'{name}/rigidity', _OUTPUT_QOS,
+                                  event_callbacks=matched('rigidity', i))
+            for i, name in enumerate(names))
+        self._markers_pub = self.create_publisher(MarkerArray, 'markers', _OUTPUT_QOS,
+                                                  event_callbacks=matched('markers'))
+        self._diagnostics_pub = self.create_publisher(DiagnosticArray, '/diagnostics',
+                                                      _OUTPUT_QOS)
+        if self.get_parameter('pressure_input').value == 'measured':
+            self._pressure_topic, qos = 'pressure', qos_profile_sensor_data
+        else:
+            self._pressure_topic, qos = 'pressure_command', _COMMAND_QOS
+        self._pressure_subs = tuple(
+            self.create_subscription(FluidPressure, f'{name}/{self._pressure_topic}',
+                                     functools.partial(self._on_pressure, i), qos)
+            for i, name in enumerate(names))
+        self._force_subs = tuple(
+            self.create_subscription(WrenchStamped, f'{name}/tip_force',
+                                     functools.partial(self._on_tip_force, i), _COMMAND_QOS)
+            for i, name in enumerate(names))
+
+    # -- parameters -------------------------------------------------------------------------
+
+    def _validate_parameters(self, parameters):
+        for param in parameters:
+            value = param.value
+            if param.name in _CHOICES and value not in _CHOICES[param.name]:
+                return SetParametersResult(
+                    successful=False,
+                    reason=f'`{param.name}` must be one of {list(_CHOICES[param.name])}, '
+                           f'got {value!r}')
+            if isinstance(value, float) and not math.isfinite(value):
+                return SetParametersResult(
+                    successful=False, reason=f'`{param.name}` must be finite, got {value}')
+        return SetParametersResult(successful=True)
+
+    def _apply_parameters(self, parameters):
+        values = {p.name: p.value for p in parameters}
+        with self._lock:
+            if 'atmospheric_pressure' in values:
+                self._core.atmospheric_pressure = values['atmospheric_pressure']
+            if 'stale_after_s' in values:
+                self._core.stale_after_s = values['stale_after_s']
+            if 'max_rate_hz' in values:
+                self._core.max_rate_hz = values['max_rate_hz']
+                self._rate_timer.timer_period_ns = int(round(1e9 / values['max_rate_hz']))
+            if values.keys() & set(_SOLVER_PARAMETERS):
+                self._core.rebuild(self._create_solver)
+                self.get_logger().info(
+                    f'solvers rebuilt: n_segments {self.get_parameter("n_segments").value}, '
+                    f'{self.get_parameter("pressure_model").value} pressure model')
+                self._run(range(len(self._core.fingers)))
+
+    # -- inputs -----------------------------------------------------------------------------
+
+    def _now_ns(self):
+        return self.get_clock().now().nanoseconds
+
+    def _on_pressure(self, index, msg):
+        with self._lock:
+            check = self._core.offer_pressure(index, msg.fluid_pressure,
+                                              time_to_ns(msg.header.stamp), self._now_ns(),
+                                              source=self._pressure_topic)
+            self._after_input(index, check, self._pressure_topic)
+
+    def _on_tip_force(self, index, msg):
+        with self._lock:
+            force = msg.wrench.force
+            check = self._core.offer_tip_force(index, force.x, force.z, msg.header.frame_id,
+                                               time_to_ns(msg.header.stamp), self._now_ns())
+            self._after_input(index, check, 'tip_force')
+
+    def _after_input(self, index, check, topic):
+        if not check.accepted:
+            name = self._core.names[index]
+            self._throttled(
+                self.get_logger().warning, (index, check.rejection),
+                f'{name}/{topic} rejected ({check.rejection.value}), keeping the last good '
+                f'state: {check.detail}')
+            self._publish_diagnostics()
+            return
+        self._run(self._core.ready(time.monotonic_ns()))
+        if self._core.pending:
+            self._wake()
+
+    def _on_timer(self):
+        with self._lock:
+            self._run(self._core.ready(time.monotonic_ns()))
+            self._flush_slow_outputs()
+            if not (self._core.pending or self._markers.dirty or self._rigidities.dirty):
+                self._rate_timer.cancel()
+
+    def _wake(self):
+        if self._rate_timer.is_canceled():
+            self._rate_timer.reset()
+
+    # -- outputs ----------------------------------------------------------------------------
+
+    def _run(self, indices):
+        """Process the given fingers' pending input and publish what changed."""
+        updates = self._core.process(indices, time.monotonic_ns())
+        if not updates:
+            return
+        good = [u for u in updates if u.result is not None]
+        for update in good:
+            self._publish_shape(update)
+        for update in good:
+            # The circle fit is the costliest step: only for listeners (a new one is
+            # sent the current value on matching).
+            if self._curvature_pubs[update.index].get_subscription_count():
+                self._curvature_pubs[update.index].publish(curvature_message(update.result))
+        for update in updates:
+            if update.result is None:
+                state = self._core.fingers[update.index]
+                self._throttled(
+                    self.get_logger().error, (update.index, 'solver'),
+                    f'{state.name}: solve at {state.gauge:.1f} Pa gauge, tip force '
+                    f'({state.tip_force[0]:g}, {state.tip_force[1]:g}) N failed, keeping the '
+                    f'last good state: {update.failure}')
+        self._publish_diagnostics()
+        if good and self._markers_pub.get_subscription_count():
+            self._markers.dirty.update(u.index for u in good)
+        self._rigidities.dirty.update(
+            u.index for u in good if self._rigidity_pubs[u.index].get_subscription_count())
+        self._flush_slow_outputs()
+
+    def _shape_payload(self, result, frame_id, stamp_ns):
+        if self._serialize_shapes is None:
+            # The fast serializer must decode to the reference message; else fall back.
+            reference = shape_message(result, frame_id, stamp_ns)
+            decoded = deserialize_message(serialized_shape(result, frame_id, stamp_ns), Path)
+            self._serialize_shapes = decoded == reference
+            if not self._serialize_shapes:
+                self.get_logger().warning('serialized_shape does not decode to shape_message; '
+                                          'publishing Path objects (slower)')
+        if self._serialize_shapes:
+            return serialized_shape(result, frame_id, stamp_ns)
+        return shape_message(result, frame_id, stamp_ns)
+
+    def _publish_shape(self, update):
+        name = self._core.names[update.index]
+        payload = self._shape_payload(update.result, name, update.stamp_ns)
+        self._last_shape[update.index] = payload
+        self._shape_pubs[update.index].publish(payload)
+
+    def _flush_slow_outputs(self, force=False):
+        """Send the slow outputs that are due (all when forced); wake the timer for the rest."""
+        now = time.monotonic_ns()
+        for slow in (self._markers, self._rigidities):
+            if not slow.dirty:
+                continue
+            if force or slow.due(now):
+                slow.publish(slow.take(now))
+            else:
+                self._wake()
+
+    def _publish_rigidities(self, indices):
+        for index in indices:
+            state = self._core.fingers[index]
+            if state.result is None:
+                continue
+            k_x = self._core.rigidity(index, 'x')
+            k_z = self._core.rigidity(index, 'z')
+            self._rigidity_pubs[index].publish(
+                rigidity_message(k_x, k_z, state.name, state.result_stamp_ns))
+
+    def _publish_markers(self, indices):
+        markers = []
+        for index in indices:
+            state = self._core.fingers[index]
+            if state.result is None:
+                continue
+            color = _VALID_COLOR if state.result.valid else _INVALID_COLOR
+            markers.append(shape_marker(state.result, state.name, state.result_stamp_ns,
+                                        index, color=color))
+        if markers:
+            self._markers_pub.publish(MarkerArray(markers=markers))
+
+    def _on_matched(self, kind, index, info):
+        """Send the current state to a new subscriber (outputs are volatile)."""
+        if info.current_count_change <= 0:
+            return
+        with self._lock:
+            if kind == 'markers':
+                self._markers.dirty.update(range(len(self._core.fingers)))
+                self._flush_slow_outputs(force=True)
+            elif kind == 'rigidity':
+                self._rigidities.dirty.add(index)
+                self._flush_slow_outputs(force=True)
+            elif kind == 'curvature':
+                result = self._core.fingers[index].result
+                if result is not None:
+                    self._curvature_pubs[index].publish(curvature_message(result))
+            elif self._last_shape[index] is not None:
+                self._shape_pubs[index].publish(self._last_shape[index])
+
+    def _publish_diagnostics(self, force=False):
+        with self._lock:
+            kinds = tuple(self._core.health(i) for i in range(len(self._core.fingers)))
+            if not force and kinds == self._last_kinds:
+                return
+            self._last_kinds = kinds
+            statuses = [self._core.status(i) for i in range(len(kinds))]
+            array = DiagnosticArray()
+            array.header.stamp = ns_to_time(self._now_ns())
+            array.status = [
+                DiagnosticStatus(
+                    level=_LEVELS[s.level], name=f'{self.get_fully_qualified_name()}: {name}',
+                    message=s.message, hardware_id=name,
+                    values=[KeyValue(key=k, value=v) for k, v in s.values.items()])
+                for name, s in zip(self._core.names, statuses)]
+            self._diagnostics_pub.publish(array)
+
+    def _throttled(self, log, key, text):
+        """Log at most once per throttle period per (finger, kind) key."""
+        now = time.monotonic()
+        last = self._last_log.get(key)
+        if last is None or now - last >= _THROTTLE_S:
+            self._last_log[key] = now
+            log(text)
+
+
+def main(args=None):
+    """Run the model node until shutdown."""
+    rclpy.init(args=args)
+    try:
+        node = ModelNode()
+    except (ValueError, ParameterException) as exc:
+        get_logger('model_node').fatal(f'cannot start: {exc}')
+        rclpy.try_shutdown()
+        return 1
+    try:
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == '__main__':
+    main()

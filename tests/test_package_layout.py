@@ -1,0 +1,146 @@
+"""Build the package with colcon into a temporary prefix and check what it installs."""
+
+import os
+import pathlib
+import re
+import shutil
+import signal
+import subprocess
+import sys
+import threading
+
+from nav_msgs.msg import Path
+import pytest
+import rclpy
+from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
+
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+BIN = pathlib.Path(sys.executable).parent
+PYTHON_DIR = f'python{sys.version_info.major}.{sys.version_info.minor}'
+# Source-tree entries that are not part of the package, or that a build would leave behind.
+_NOT_COPIED = ('.venv', '.git', 'build', 'install', 'log', 'out', '*.egg-info', '__pycache__',
+               '.pytest_cache')
+
+
+def _console_scripts():
+    text = (ROOT / 'setup.py').read_text()
+    return re.findall(r"'([\w-]+) = fpc_gripper[\w.]*:main'", text)
+
+
+@pytest.fixture(scope='module')
+def prefix(tmp_path_factory):
+    """Copy the repository (without .venv) and build it with colcon; return the prefix."""
+    base = tmp_path_factory.mktemp('colcon')
+    shutil.copytree(ROOT, base / 'src' / 'fpc_gripper',
+                    ignore=shutil.ignore_patterns(*_NOT_COPIED))
+    colcon = [str(BIN / 'colcon'), '--log-base', str(base / 'log')]
+    command = colcon + ['build', '--base-paths', str(base / 'src'),
+                        '--build-base', str(base / 'build'),
+                        '--install-base', str(base / 'install')]
+    # --packages-select comes with colcon-package-selection; the copy holds one package anyway.
+    usage = subprocess.run(colcon + ['build', '--help'], capture_output=True, text=True,
+                           timeout=60).stdout
+    if '--packages-select' in usage:
+        command += ['--packages-select', 'fpc_gripper']
+    # The venv's interpreter first on PATH: the ament_python build runs with it.
+    env = dict(os.environ, PATH=f'{BIN}{os.pathsep}{os.environ.get("PATH", "")}')
+    build = subprocess.run(command, cwd=base, env=env, capture_output=True, text=True,
+                           timeout=240)
+    assert build.returncode == 0, build.stdout[-3000:] + build.stderr[-3000:]
+    return base / 'install' / 'fpc_gripper'
+
+
+def _installed_env(prefix):
+    site = prefix / 'lib' / PYTHON_DIR / 'site-packages'
+    return dict(os.environ, AMENT_PREFIX_PATH=str(prefix), PYTHONPATH=str(site))
+
+
+def test_console_scripts_are_installed_and_executable(prefix):
+    scripts = _console_scripts()
+    assert 'model_node' in scripts
+    for name in scripts:
+        path = prefix / 'lib' / 'fpc_gripper' / name
+        assert path.is_file(), path
+        assert os.access(path, os.X_OK), path
+    shebang = (prefix / 'lib' / 'fpc_gripper' / 'model_node').read_text().splitlines()[0]
+    assert pathlib.Path(shebang[2:]).parent == BIN, shebang
+
+
+def test_share_and_resource_index(prefix):
+    share = prefix / 'share' / 'fpc_gripper'
+    assert (share / 'package.xml').read_text() == (ROOT / 'package.xml').read_text()
+    configs = sorted(p.name for p in (ROOT / 'msg_configs').glob('*.yaml'))
+    assert configs and sorted(p.name for p in (share / 'msg_configs').glob('*.yaml')) == configs
+    assert (prefix / 'share' / 'ament_index' / 'resource_index' / 'packages'
+            / 'fpc_gripper').is_file()
+
+
+def test_ament_index_finds_the_installed_package(prefix):
+    code = ('from ament_index_python.packages import get_package_prefix, '
+            'get_package_share_directory\n'
+            'import fpc_gripper\n'
+            'from fpc_gripper.io.config import default_gripper_config_path\n'
+            "print(get_package_prefix('fpc_gripper'))\n"
+            "print(get_package_share_directory('fpc_gripper'))\n"
+            'print(fpc_gripper.__file__)\n'
+            'print(default_gripper_config_path())\n')
+    out = subprocess.run([sys.executable, '-c', code], env=_installed_env(prefix), cwd=prefix,
+                         capture_output=True, text=True, timeout=60, check=True).stdout
+    found_prefix, share, module, config = out.split('\n')[:4]
+    assert pathlib.Path(found_prefix) == prefix
+    assert pathlib.Path(share) == prefix / 'share' / 'fpc_gripper'
+    assert pathlib.Path(module).is_relative_to(prefix)
+    assert pathlib.Path(config) == prefix / 'share' / 'fpc_gripper' / 'msg_configs' / \
+        'gripper_paper.yaml'
+
+
+@pytest.mark.ros
+def test_installed_model_node_runs_and_stops_on_sigint(prefix):
+    """Start the installed node with parameters; receive its shape; SIGINT ends it with 0."""
+    context = Context()
+    rclpy.init(context=context)
+    node = rclpy.create_node('layout_probe', context=context)
+    received = threading.Event()
+    shapes = []
+
+    def on_shape(msg):
+        shapes.append(msg)
+        received.set()
+
+    node.create_subscription(Path, '/layout/finger_0/shape', on_shape, 10)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    spinner = threading.Thread(target=executor.spin, daemon=True)
+    spinner.start()
+    process = subprocess.Popen(
+        [str(prefix / 'lib' / 'fpc_gripper' / 'model_node'), '--ros-args',
+         '-p', 'n_segments:=4', '-r', '__ns:=/layout'],
+        env=_installed_env(prefix), stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        assert received.wait(30.0), 'no shape from the installed model_node'
+        # The parameter took: 4 segments of 16 samples, then the tip.
+        assert len(shapes[0].poses) == 4 * 16 + 1
+        assert shapes[0].header.frame_id == 'finger_0'
+        process.send_signal(signal.SIGINT)
+        output, _ = process.communicate(timeout=30)
+        assert process.returncode == 0, output
+        assert 'ready: 3 fingers' in output
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.communicate()
+        executor.shutdown(timeout_sec=5.0)
+        spinner.join(timeout=5.0)
+        node.destroy_node()
+        context.try_shutdown()
+
+
+@pytest.mark.ros
+def test_installed_model_node_refuses_a_bad_parameter(prefix):
+    process = subprocess.run(
+        [str(prefix / 'lib' / 'fpc_gripper' / 'model_node'), '--ros-args',
+         '-p', 'pressure_model:=polytropic'],
+        env=_installed_env(prefix), capture_output=True, text=True, timeout=60)
+    assert process.returncode == 1
+    assert "`pressure_model` must be one of ['adiabatic', 'isobaric']" in process.stderr
