@@ -115,7 +115,7 @@ def test_installed_model_node_runs_and_stops_on_sigint(prefix):
     spinner.start()
     process = subprocess.Popen(
         [str(prefix / 'lib' / 'fpc_gripper' / 'model_node'), '--ros-args',
-         '-p', 'n_segments:=4', '-r', '__ns:=/layout'],
+         '-p', 'tolerance:=0.0', '-p', 'n_segments:=4', '-r', '__ns:=/layout'],
         env=_installed_env(prefix), stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:
         assert received.wait(30.0), 'no shape from the installed model_node'

@@ -5,17 +5,15 @@ from .design import ActuatorDesign, PAPER_MATERIALS
 from .ladder import ArcResult, ArcSolver, LadderResult, RodResult, RodSolver
 from .materials import default_emc_coefficients, fit_emc_polynomial, Material
 from .section_law import build_section_law, section_minimiser, SectionLaw, station_layout
-from .selection import (choose_model, ModelChoice, RefinedResult, RUNGS, Scene,
+from .selection import (AdaptiveSolver, choose_model, ModelChoice, RefinedResult, RUNGS, Scene,
                         solve_auto_refine)
 from .solver import CCMResult, CCMSolver, PRESSURE_MODELS, RigidityResult, SolverStatus
 
 __all__ = [
-    'ActuatorDesign', 'CCMResult', 'CCMSolver', 'CircleFit', 'Material', 'PAPER_MATERIALS',
-    'PRESSURE_MODELS', 'RigidityResult', 'SolverStatus', 'default_emc_coefficients',
-    'fit_circle', 'fit_emc_polynomial', 'flexural_rigidity',
-]
-__all__ += [
-    'ArcResult', 'ArcSolver', 'LadderResult', 'ModelChoice', 'RUNGS', 'RefinedResult',
-    'RodResult', 'RodSolver', 'Scene', 'SectionLaw', 'build_section_law', 'choose_model',
+    'ActuatorDesign', 'AdaptiveSolver', 'ArcResult', 'ArcSolver', 'CCMResult', 'CCMSolver',
+    'CircleFit', 'LadderResult', 'Material', 'ModelChoice', 'PAPER_MATERIALS',
+    'PRESSURE_MODELS', 'RUNGS', 'RefinedResult', 'RigidityResult', 'RodResult', 'RodSolver',
+    'Scene', 'SectionLaw', 'SolverStatus', 'build_section_law', 'choose_model',
+    'default_emc_coefficients', 'fit_circle', 'fit_emc_polynomial', 'flexural_rigidity',
     'section_minimiser', 'solve_auto_refine', 'station_layout',
 ]

@@ -15,7 +15,8 @@ from .section_law import station_layout
 from .solver import _finite, CCMSolver, PRESSURE_MODELS
 
 __all__ = ['Scene', 'ModelChoice', 'RUNGS', 'choose_model', 'load_error_model', 'make_solver',
-           'a_posteriori_error', 'solve_auto_refine', 'RefinedResult', 'aligned_edges']
+           'a_posteriori_error', 'solve_auto_refine', 'RefinedResult', 'aligned_edges',
+           'AdaptiveSolver']
 
 #: Rungs of the ladder: uniform arc (a), CCM with the paper's reconstruction, CCM with the
 #: consistent reconstruction (uniform segments, or 'ccm_aligned': segment edges on every
@@ -374,3 +375,103 @@ def solve_auto_refine(design, pressure=0.0, tip_force=(0.0, 0.0), n_segments=8,
         'still breaks the small-rotation rule'
     return RefinedResult(result, history, False,
                          f'no valid equilibrium up to N = {last[0]}: {why}')
+
+
+class AdaptiveSolver:
+    """
+    Solver that models no more than a scene needs, with CCMSolver's interface.
+
+    Each solve picks the cheapest rung and N that `choose_model` predicts to meet
+    `tolerance` for that pressure and tip force, and doubles N while a segment
+    breaks the small-rotation rule or the solve fails. Unloaded scenes get
+    coarser models than loaded, strongly curled ones. Choices are cached per
+    scene bin (`pressure_bin` [Pa], `force_bin` [N]), since choosing solves the
+    arc rung (about 3 ms); the error model's own bins are far coarser.
+
+    Parameters
+    ----------
+    design : ActuatorDesign
+    tolerance : float
+        Tip-position tolerance against the geometrically exact rod [m], > 0.
+    pressure_model : {'adiabatic', 'isobaric'}
+    max_segments : int
+        Largest N that refinement may reach.
+    pressure_bin, force_bin : float
+        Cache resolution of the choice [Pa], [N].
+
+    Attributes
+    ----------
+    last_choice : ModelChoice or None
+        The choice behind the last solve, with the N actually used after refinement.
+
+    """
+
+    def __init__(self, design, tolerance=0.5e-3, pressure_model='adiabatic', max_segments=128,
+                 pressure_bin=2e3, force_bin=0.01, error_model=None):
+        if not isinstance(design, ActuatorDesign):
+            raise TypeError(f'`design` must be an ActuatorDesign, got {type(design).__name__}')
+        self.tolerance = _finite('tolerance', tolerance, '[m]')
+        if self.tolerance <= 0.0:
+            raise ValueError(f'`tolerance` must be > 0 [m], got {self.tolerance}')
+        if pressure_model not in PRESSURE_MODELS:
+            raise ValueError(f'`pressure_model` must be one of {sorted(PRESSURE_MODELS)}, '
+                             f'got {pressure_model!r}')
+        self.design = design
+        self.pressure_model = pressure_model
+        self.max_segments = int(max_segments)
+        self._bins = (float(pressure_bin), float(force_bin))
+        self._error_model = error_model
+        self._solvers = {}
+        self._choices = {}
+        self.last_choice = None
+
+    def choose(self, pressure, tip_force):
+        """Return the ModelChoice for a scene, from the cache when its bin was seen."""
+        scene = Scene(self.design, pressure, tuple(tip_force), self.pressure_model)
+        pb, fb = self._bins
+        key = (round(scene.pressure / pb), round(scene.tip_force[0] / fb),
+               round(scene.tip_force[1] / fb))
+        choice = self._choices.get(key)
+        if choice is None:
+            choice = choose_model(scene, self.tolerance, self._error_model)
+            self._choices[key] = choice
+        return choice
+
+    def solver_for(self, rung, n_segments):
+        """The (cached) solver of a rung and N."""
+        key = (rung, int(n_segments))
+        if key not in self._solvers:
+            self._solvers[key] = make_solver(rung, n_segments, self.design, self.pressure_model)
+        return self._solvers[key]
+
+    def _warm(self, solver, initial):
+        return initial if getattr(initial, 'solver', None) is solver else None
+
+    def solve(self, pressure=0.0, tip_force=(0.0, 0.0), initial=None):
+        """
+        Solve with the model the scene needs; see `CCMSolver.solve`.
+
+        `initial` warm-starts only a result of the same underlying solver; a model
+        change starts from the flat state. The result carries `model_choice`.
+        """
+        choice = self.choose(pressure, tip_force)
+        rung, n = choice.rung, choice.n_segments
+        while True:
+            solver = self.solver_for(rung, n)
+            result = solver.solve(pressure, tip_force, initial=self._warm(solver, initial))
+            refinable = rung.startswith('ccm') and 2 * n <= self.max_segments
+            if (result.success and result.valid) or not refinable:
+                break
+            n *= 2
+        self.last_choice = ModelChoice(rung, n, choice.predicted_error,
+                                       choice.reason if n == choice.n_segments else
+                                       f'{choice.reason}; refined to N = {n}', choice.cost)
+        result.model_choice = self.last_choice
+        return result
+
+    def rigidity(self, pressure=0.0, axis='x', displacement=0.010, initial=None):
+        """Flexural rigidity with the model the unloaded scene needs; see `CCMSolver`."""
+        choice = self.choose(pressure, (0.0, 0.0))
+        solver = self.solver_for(choice.rung, choice.n_segments)
+        return solver.rigidity(pressure, axis, displacement,
+                               initial=self._warm(solver, initial))

@@ -348,8 +348,10 @@ def run_session(output_dir, object_diameter=0.040, grasp_force=0.5, open_apertur
         nodes.append(RegulatorBridge.create_active(parameter_overrides=[
             cfg, Parameter('backend', value='sim'), Parameter('publish_rate_hz', value=50.0)],
             **common))
+        # tolerance 0: the paper CCM8 that the controller's inverse model and the virtual
+        # object also use, so the session is one consistent plant.
         nodes.append(ModelNode(parameter_overrides=[
-            cfg, Parameter('pressure_input', value='measured'),
+            cfg, Parameter('tolerance', value=0.0), Parameter('pressure_input', value='measured'),
             Parameter('max_rate_hz', value=10.0)], **common))
         nodes.append(GripperController(parameter_overrides=[cfg], **common))
         virtual = VirtualObjectNode(parameter_overrides=[

@@ -297,6 +297,17 @@ def _real_in_range(name, value, low, high, unit):
     return value
 
 
+def _model_label(result):
+    """Rung and N of the model behind a result, e.g. 'ccm_aligned N=22' or 'ccm N=8'."""
+    if result is None:
+        return 'none'
+    choice = getattr(result, 'model_choice', None)
+    if choice is not None:
+        return f'{choice.rung} N={choice.n_segments}' if choice.n_segments else choice.rung
+    segments = getattr(getattr(result, 'solver', None), 'n_segments', None)
+    return f'ccm N={segments}' if segments else type(result).__name__
+
+
 class ModelCore:
     """
     Per-finger model state machine of the model node, free of ROS.
@@ -720,6 +731,7 @@ class ModelCore:
             'pressure_pa': pressure,
             'tip_force': f'f0={force[0]:.6g} N, p0={force[1]:.6g} N',
             'iterations': str(state.iterations),
+            'model': _model_label(result),
             'solve_time_ms': f'{state.solve_time_s * 1e3:.3f}',
             'valid': str(valid),
             'last_rejection': state.last_rejection,

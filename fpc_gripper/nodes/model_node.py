@@ -41,7 +41,7 @@ from fpc_gripper.io.messages import serialized_shape
 from fpc_gripper.io.messages import shape_marker
 from fpc_gripper.io.messages import shape_message
 from fpc_gripper.io.messages import time_to_ns
-from fpc_gripper.model import CCMSolver
+from fpc_gripper.model import AdaptiveSolver, CCMSolver
 from fpc_gripper.model import PRESSURE_MODELS
 from fpc_gripper.nodes.model_core import Level
 from fpc_gripper.nodes.model_core import ModelCore
@@ -49,7 +49,7 @@ from fpc_gripper.nodes.model_core import ModelCore
 PRESSURE_INPUTS = ('command', 'measured')
 _CHOICES = {'pressure_model': tuple(PRESSURE_MODELS), 'pressure_input': PRESSURE_INPUTS}
 # Parameters whose change rebuilds the solvers.
-_SOLVER_PARAMETERS = ('n_segments', 'pressure_model')
+_SOLVER_PARAMETERS = ('n_segments', 'pressure_model', 'tolerance')
 
 _OUTPUT_QOS = QoSProfile(depth=10, history=HistoryPolicy.KEEP_LAST,
                          reliability=ReliabilityPolicy.RELIABLE)
@@ -101,7 +101,13 @@ def _parameter_table():
         ('gripper_config', str(default_gripper_config_path()),
          'Gripper YAML: one set of topics per finger, named and framed finger_<i>.',
          {'read_only': True}),
-        ('n_segments', 8, 'Number N of CCM segments per finger; a change rebuilds the solvers.',
+        ('tolerance', 0.5e-3,
+         'Tip-position tolerance against the geometrically exact rod [m]: per scene the node '
+         'uses the cheapest model that meets it (fpc_gripper.model.AdaptiveSolver), refining '
+         'when a segment passes 45 degrees. 0 uses the paper CCM with a fixed n_segments.',
+         {'floating_point_range': _float_range(0.0, 0.05)}),
+        ('n_segments', 8, 'Number N of CCM segments per finger when tolerance is 0; a change '
+         'rebuilds the solvers.',
          {'integer_range': _int_range(1, 64)}),
         ('pressure_model', 'adiabatic',
          "Pressure work: 'adiabatic' (k_p = 1/(gamma - 1), paper eq. 20) or 'isobaric' "
@@ -214,8 +220,9 @@ class ModelNode(Node):
         with self._lock:
             self._run(range(len(names)))
         self.get_logger().info(
-            f'ready: {len(names)} fingers ({", ".join(names)}), n_segments '
-            f'{param("n_segments").value}, {param("pressure_model").value} pressure model, '
+            f'ready: {len(names)} fingers ({", ".join(names)}), tolerance '
+            f'{param("tolerance").value} m, n_segments {param("n_segments").value}, '
+            f'{param("pressure_model").value} pressure model, '
             f'input {self._pressure_topic}, max_rate_hz {param("max_rate_hz").value:g}')
 
     # -- public helpers ---------------------------------------------------------------------
@@ -241,10 +248,15 @@ class ModelNode(Node):
 
         Returns
         -------
-        CCMSolver
-            Or whatever the injected factory returns.
+        AdaptiveSolver or CCMSolver
+            An AdaptiveSolver while `tolerance` > 0, else a CCMSolver with `n_segments`;
+            an injected factory is always used as given.
 
         """
+        tolerance = self.get_parameter('tolerance').value
+        if tolerance > 0.0 and self._solver_factory is CCMSolver:
+            return AdaptiveSolver(design, tolerance=tolerance,
+                                  pressure_model=self.get_parameter('pressure_model').value)
         return self._solver_factory(design,
                                     n_segments=self.get_parameter('n_segments').value,
                                     pressure_model=self.get_parameter('pressure_model').value)
@@ -313,7 +325,8 @@ class ModelNode(Node):
             if values.keys() & set(_SOLVER_PARAMETERS):
                 self._core.rebuild(self._create_solver)
                 self.get_logger().info(
-                    f'solvers rebuilt: n_segments {self.get_parameter("n_segments").value}, '
+                    f'solvers rebuilt: tolerance {self.get_parameter("tolerance").value} m, '
+                    f'n_segments {self.get_parameter("n_segments").value}, '
                     f'{self.get_parameter("pressure_model").value} pressure model')
                 self._run(range(len(self._core.fingers)))
 

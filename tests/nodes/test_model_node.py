@@ -28,7 +28,7 @@ from fpc_gripper.io.config import load_gripper_config
 from fpc_gripper.io.messages import serialized_shape
 from fpc_gripper.io.messages import shape_message
 from fpc_gripper.io.messages import time_to_ns
-from fpc_gripper.model import CCMSolver
+from fpc_gripper.model import AdaptiveSolver, CCMSolver, choose_model, Scene
 from fpc_gripper.nodes.model_node import ModelNode
 
 ATM = 101325.0
@@ -185,8 +185,9 @@ def ros():
 
 @pytest.fixture(scope='module')
 def model(ros):
-    """A default model node in /m, with its probe."""
-    node = ros.add(ModelNode(context=ros.context, namespace='/m'))
+    """A paper-CCM8 model node in /m (tolerance 0: fixed n_segments), with its probe."""
+    node = ros.add(ModelNode(context=ros.context, namespace='/m', parameter_overrides=[
+        Parameter('tolerance', value=0.0)]))
     probe = Probe(ros.context, '/m')
     ros.add(probe.node)
     return node, probe
@@ -196,7 +197,8 @@ def model(ros):
 def single(ros):
     """A single-segment model node in /f reading measured pressure, with its probe."""
     node = ros.add(ModelNode(context=ros.context, namespace='/f', parameter_overrides=[
-        Parameter('n_segments', value=1), Parameter('pressure_input', value='measured')]))
+        Parameter('tolerance', value=0.0), Parameter('n_segments', value=1),
+        Parameter('pressure_input', value='measured')]))
     probe = Probe(ros.context, '/f', measured=True)
     ros.add(probe.node)
     return node, probe
@@ -231,6 +233,34 @@ def test_pressure_command_gives_the_core_solution(model, finger, gauge):
     expected = direct(gauge)
     assert_shape_is(path, expected, finger)
     probe.curvature_becomes(finger, expected.curvature)
+
+
+@pytest.fixture(scope='module')
+def adaptive(ros):
+    """A model node with the default tolerance (0.5 mm) in /a, with its probe."""
+    node = ros.add(ModelNode(context=ros.context, namespace='/a'))
+    probe = Probe(ros.context, '/a')
+    ros.add(probe.node)
+    return node, probe
+
+
+@pytest.mark.ros
+def test_default_tolerance_uses_the_model_the_scene_needs(adaptive):
+    node, probe = adaptive
+    assert node.get_parameter('tolerance').value == 0.5e-3
+    reference = AdaptiveSolver(DESIGN, tolerance=0.5e-3)
+    stamp = probe.send_pressure('finger_0', ATM + 150e3)
+    expected = reference.solve(150e3)
+    assert_shape_is(probe.shape_stamped('finger_0', stamp), expected, 'finger_0')
+    # The choice is an independent decision of choose_model for this scene.
+    choice = choose_model(Scene(DESIGN, 150e3), 0.5e-3)
+    assert (expected.model_choice.rung, expected.model_choice.n_segments) == (
+        choice.rung, choice.n_segments)
+    # A tip load needs a finer model than the unloaded scene.
+    stamp = probe.send_force('finger_0', 0.0, 0.5)
+    loaded = reference.solve(150e3, (0.0, 0.5))
+    assert_shape_is(probe.shape_stamped('finger_0', stamp), loaded, 'finger_0')
+    assert loaded.model_choice.n_segments > expected.model_choice.n_segments
 
 
 @pytest.mark.ros
