@@ -218,7 +218,16 @@ def choose_model(scene, tolerance, error_model=None):
     if tolerance <= 0.0:
         raise ValueError(f'`tolerance` must be > 0 [m], got {tolerance}')
     model = load_error_model() if error_model is None else error_model
-    rod_cost = next((m['time'] for m in model['models'] if m['rung'] == 'rod'), float('nan'))
+    turning, _ = _scene_features(scene)
+    return _choose(model, _scene_bin(model, scene, turning), tolerance)
+
+
+def _scene_bin(model, scene, turning):
+    """
+    The error-model cell of a scene: (turning bin, load bin), or the reasons it is outside.
+
+    Two scenes in the same cell get the same choice for any tolerance.
+    """
     ranges = model['ranges']
     prestrain = scene.design.prestrain
     outside = []
@@ -229,17 +238,25 @@ def choose_model(scene, tolerance, error_model=None):
     load_edges = model['load_bins']
     if scene.load > load_edges[-1] * (1 + 1e-12):
         outside.append(f'load {scene.load:g} N')
-    turning, _ = _scene_features(scene)
     turn_edges = model['turning_bins']
     if turning > turn_edges[-1]:
         outside.append(f'turning {turning:.3g} rad')
     if outside:
+        return tuple(outside)
+    return (int(np.searchsorted(turn_edges, turning, side='left')),
+            int(np.searchsorted(load_edges, scene.load * (1 - 1e-12), side='left')))
+
+
+def _choose(model, cell, tolerance):
+    """The cheapest model whose measured bound in `cell` meets `tolerance`."""
+    rod_cost = next((m['time'] for m in model['models'] if m['rung'] == 'rod'), float('nan'))
+    if isinstance(cell[0], str):
         return ModelChoice('rod', 0, 0.0, 'outside the measured envelope ('
-                           + ', '.join(outside) + '): geometrically exact rod', rod_cost)
-    t_bin = int(np.searchsorted(turn_edges, turning, side='left'))
-    l_bin = int(np.searchsorted(load_edges, scene.load * (1 - 1e-12), side='left'))
+                           + ', '.join(cell) + '): geometrically exact rod', rod_cost)
+    t_bin, l_bin = cell
+    where = (f"turning bin {t_bin} (<= {model['turning_bins'][t_bin]:.2f} rad) and load bin "
+             f"{l_bin} (<= {model['load_bins'][l_bin]:g} N)")
     safety = float(model['safety'])
-    best = None
     for entry in sorted(model['models'], key=lambda m: m['time']):
         if entry['rung'] == 'rod':
             continue
@@ -247,16 +264,11 @@ def choose_model(scene, tolerance, error_model=None):
         if bound is None or entry['invalid'][l_bin][t_bin]:
             continue
         if bound * safety <= tolerance:
-            best = entry
-            break
-    if best is None:
-        return ModelChoice('rod', 0, 0.0, f'no cheaper model meets {tolerance:g} m at turning '
-                           f'{turning:.2f} rad and load {scene.load:g} N', rod_cost)
-    bound = best['bound'][l_bin][t_bin] * safety
-    return ModelChoice(best['rung'], int(best['n_segments']), float(bound),
-                       f"cheapest measured model with bound {bound:.2e} m <= {tolerance:g} m "
-                       f'at turning {turning:.2f} rad and load {scene.load:g} N',
-                       float(best['time']))
+            return ModelChoice(entry['rung'], int(entry['n_segments']), float(bound * safety),
+                               f'cheapest measured model with bound {bound * safety:.2e} m '
+                               f'<= {tolerance:g} m at {where}', float(entry['time']))
+    return ModelChoice('rod', 0, 0.0, f'no cheaper model meets {tolerance:g} m at {where}',
+                       rod_cost)
 
 
 def a_posteriori_error(scene, rung, n_segments):
@@ -384,9 +396,9 @@ class AdaptiveSolver:
     Each solve picks the cheapest rung and N that `choose_model` predicts to meet
     `tolerance` for that pressure and tip force, and doubles N while a segment
     breaks the small-rotation rule or the solve fails. Unloaded scenes get
-    coarser models than loaded, strongly curled ones. Choices are cached per
-    scene bin (`pressure_bin` [Pa], `force_bin` [N]), since choosing solves the
-    arc rung (about 3 ms); the error model's own bins are far coarser.
+    coarser models than loaded, strongly curled ones. The choice is the one
+    `choose_model` makes, computed from a warm-started arc solve and cached per
+    cell of the error model.
 
     Parameters
     ----------
@@ -396,8 +408,8 @@ class AdaptiveSolver:
     pressure_model : {'adiabatic', 'isobaric'}
     max_segments : int
         Largest N that refinement may reach.
-    pressure_bin, force_bin : float
-        Cache resolution of the choice [Pa], [N].
+    error_model : dict, optional
+        Default: `load_error_model()`.
 
     Attributes
     ----------
@@ -407,7 +419,7 @@ class AdaptiveSolver:
     """
 
     def __init__(self, design, tolerance=0.5e-3, pressure_model='adiabatic', max_segments=128,
-                 pressure_bin=2e3, force_bin=0.01, error_model=None):
+                 error_model=None):
         if not isinstance(design, ActuatorDesign):
             raise TypeError(f'`design` must be an ActuatorDesign, got {type(design).__name__}')
         self.tolerance = _finite('tolerance', tolerance, '[m]')
@@ -419,22 +431,30 @@ class AdaptiveSolver:
         self.design = design
         self.pressure_model = pressure_model
         self.max_segments = int(max_segments)
-        self._bins = (float(pressure_bin), float(force_bin))
-        self._error_model = error_model
+        self._model = load_error_model() if error_model is None else error_model
+        self._arc = ArcSolver(design, pressure_model=pressure_model)
+        self._arc_state = None
         self._solvers = {}
         self._choices = {}
         self.last_choice = None
 
     def choose(self, pressure, tip_force):
-        """Return the ModelChoice for a scene, from the cache when its bin was seen."""
+        """
+        Return the ModelChoice for a scene: exactly what `choose_model` picks.
+
+        The scene's feature comes from an arc solve warm-started from the previous
+        one, and choices are cached per error-model cell, so a sweep pays for one
+        short arc solve per step and one choice per cell.
+        """
         scene = Scene(self.design, pressure, tuple(tip_force), self.pressure_model)
-        pb, fb = self._bins
-        key = (round(scene.pressure / pb), round(scene.tip_force[0] / fb),
-               round(scene.tip_force[1] / fb))
-        choice = self._choices.get(key)
+        arc = self._arc.solve(scene.pressure, scene.tip_force, initial=self._arc_state)
+        if not arc.success:
+            arc = self._arc.solve(scene.pressure, scene.tip_force)
+        self._arc_state = arc if arc.success else None
+        cell = _scene_bin(self._model, scene, abs(float(arc.beta[0])))
+        choice = self._choices.get(cell)
         if choice is None:
-            choice = choose_model(scene, self.tolerance, self._error_model)
-            self._choices[key] = choice
+            choice = self._choices[cell] = _choose(self._model, cell, self.tolerance)
         return choice
 
     def solver_for(self, rung, n_segments):
