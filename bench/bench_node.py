@@ -64,11 +64,12 @@ def command_gauge(tick, finger, mode):
 class ModelProcess:
     """The model node in a child process, in its own namespace."""
 
-    def __init__(self, namespace, max_rate_hz):
+    def __init__(self, namespace, max_rate_hz, tolerance):
         self.namespace = namespace
         self.process = subprocess.Popen(
             [sys.executable, '-m', 'fpc_gripper.nodes.model_node', '--ros-args',
-             '-r', f'__ns:={namespace}', '-p', f'max_rate_hz:={float(max_rate_hz)}'],
+             '-r', f'__ns:={namespace}', '-p', f'max_rate_hz:={float(max_rate_hz)}',
+             '-p', f'tolerance:={float(tolerance)}'],
             cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
 
     def cpu_s(self):
@@ -223,8 +224,15 @@ def main(argv=None):
     parser.add_argument('--step', type=float, default=2.0, help='seconds per ladder step')
     parser.add_argument('--rates', type=float, nargs='+',
                         default=[100, 200, 300, 400, 500, 600, 800])
-    parser.add_argument('--output', type=pathlib.Path, default=RESULTS)
+    parser.add_argument('--tolerance', type=float, default=0.0,
+                        help='model_node tolerance [m]: 0 is the fixed paper CCM8, 5e-4 the '
+                             "node's default adaptive model")
+    parser.add_argument('--output', type=pathlib.Path, default=None,
+                        help='default bench/results/node.json, or node_tolerance.json')
     args = parser.parse_args(argv)
+    if args.output is None:
+        args.output = RESULTS if args.tolerance == 0.0 else \
+            RESULTS.with_name('node_tolerance.json')
     if os.environ.get('FPC_NETNS') != '1':
         parser.error('run inside the private namespace: scripts/isolated .venv/bin/python '
                      'bench/bench_node.py')
@@ -236,13 +244,14 @@ def main(argv=None):
     spinner = threading.Thread(target=executor.spin, daemon=True)
     spinner.start()
     results = {'machine': machine(), 'targets': TARGETS, 'baseline_ms': base,
+               'tolerance_m': args.tolerance,
                'fingers': len(FINGERS), 'keep_up_ratio': KEEP_UP,
                'modes': {'same': 'one command value for all three fingers (one shared solve)',
                          'distinct': 'a different value per finger (three solves)'},
                'load_average': os.getloadavg()}
     try:
         # Latency: the node as shipped (max_rate_hz 200), 100 Hz per finger.
-        model = ModelProcess('/bench_latency', 200.0)
+        model = ModelProcess('/bench_latency', 200.0, args.tolerance)
         driver = Driver(context, '/bench_latency')
         executor.add_node(driver.node)
         try:
@@ -258,7 +267,7 @@ def main(argv=None):
         finally:
             model.stop()
         # Throughput: lift the cap to find what the node itself sustains.
-        model = ModelProcess('/bench_rate', 10000.0)
+        model = ModelProcess('/bench_rate', 10000.0, args.tolerance)
         driver = Driver(context, '/bench_rate')
         executor.add_node(driver.node)
         try:
