@@ -5,16 +5,9 @@ import math
 
 import numpy as np
 
+from fpc_gripper.model.validation import real_number
+
 __all__ = ['PalmGeometry', 'aperture_from_points', 'tip_radius', 'tips_in_palm_frame']
-
-
-def _real(name, value, unit):
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
-        raise TypeError(f'`{name}` must be a real number {unit}, got {value!r}')
-    value = float(value)
-    if not math.isfinite(value):
-        raise ValueError(f'`{name}` must be finite {unit}, got {value}')
-    return value
 
 
 def tip_radius(z_tip, palm_radius):
@@ -153,10 +146,10 @@ class PalmGeometry:
 
     def __post_init__(self):
         """Validate the radius and the angles."""
-        radius = _real('palm_radius', self.palm_radius, '[m]')
+        radius = real_number('palm_radius', self.palm_radius, '[m]')
         if radius <= 0.0:
             raise ValueError(f'`palm_radius` must be > 0 [m], got {radius}')
-        angles = tuple(_real('mount_angles', a, '[rad]') for a in self.mount_angles)
+        angles = tuple(real_number('mount_angles', a, '[rad]') for a in self.mount_angles)
         if not angles:
             raise ValueError('`mount_angles` must hold at least one angle [rad], got ()')
         object.__setattr__(self, 'palm_radius', radius)
@@ -203,4 +196,4 @@ class PalmGeometry:
         Tips on a circle of diameter A centred on the palm axis all sit at rho = A/2,
         whatever their azimuths.
         """
-        return 0.5 * _real('aperture', aperture, '[m]')
+        return 0.5 * real_number('aperture', aperture, '[m]')

@@ -10,6 +10,7 @@ from scipy.interpolate import PchipInterpolator
 from scipy.optimize import brentq
 
 from fpc_gripper.model import CCMSolver
+from fpc_gripper.model.validation import real_number
 
 __all__ = ['InverseModel', 'InverseResult', 'InverseStatus', 'Linearisation']
 
@@ -121,20 +122,11 @@ class _SolveFailed(Exception):
         self.result = result
 
 
-def _real(name, value, unit):
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
-        raise TypeError(f'`{name}` must be a real number {unit}, got {value!r}')
-    value = float(value)
-    if not math.isfinite(value):
-        raise ValueError(f'`{name}` must be finite {unit}, got {value}')
-    return value
-
-
 def _force(tip_force):
     if np.shape(tip_force) != (2,):
         raise ValueError(f'`tip_force` must be (f0, p0) [N], got {tip_force!r}')
-    return (_real('tip_force[0]', tip_force[0], '[N]'),
-            _real('tip_force[1]', tip_force[1], '[N]'))
+    return (real_number('tip_force[0]', tip_force[0], '[N]'),
+            real_number('tip_force[1]', tip_force[1], '[N]'))
 
 
 class InverseModel:
@@ -176,10 +168,10 @@ class InverseModel:
 
     def __init__(self, design, palm_radius, max_pressure, n_segments=8,
                  pressure_model='adiabatic', grid_step=DEFAULT_GRID_STEP, xtol=DEFAULT_XTOL):
-        self.palm_radius = _real('palm_radius', palm_radius, '[m]')
-        self.max_pressure = _real('max_pressure', max_pressure, '[Pa]')
-        grid_step = _real('grid_step', grid_step, '[Pa]')
-        self.xtol = _real('xtol', xtol, '[Pa]')
+        self.palm_radius = real_number('palm_radius', palm_radius, '[m]')
+        self.max_pressure = real_number('max_pressure', max_pressure, '[Pa]')
+        grid_step = real_number('grid_step', grid_step, '[Pa]')
+        self.xtol = real_number('xtol', xtol, '[Pa]')
         if self.palm_radius <= 0.0:
             raise ValueError(f'`palm_radius` must be > 0 [m], got {self.palm_radius}')
         if self.max_pressure <= 0.0:
@@ -247,7 +239,7 @@ class InverseModel:
         CCMResult
 
         """
-        pressure = _real('pressure', pressure, '[Pa]')
+        pressure = real_number('pressure', pressure, '[Pa]')
         tip_force = _force(tip_force)
         result = self.solver.solve(pressure, tip_force=tip_force,
                                    initial=self._initial(pressure, tip_force))
@@ -302,7 +294,7 @@ class InverseModel:
             drho_df0 is computed only when f0 != 0 (else 0: no X load is modelled).
 
         """
-        pressure = _real('pressure', pressure, '[Pa]')
+        pressure = real_number('pressure', pressure, '[Pa]')
         f0, p0 = _force(tip_force)
         rho = self.rho(pressure, (f0, p0))
         h = _H_PRESSURE if pressure + _H_PRESSURE <= self.max_pressure else -_H_PRESSURE
@@ -375,7 +367,7 @@ class InverseModel:
             BELOW_RANGE or ABOVE_RANGE.
 
         """
-        target = _real('rho', rho, '[m]')
+        target = real_number('rho', rho, '[m]')
         tip_force = _force(tip_force)
         key = (target, tip_force)
         if key in self._cache:
@@ -466,8 +458,8 @@ class InverseModel:
             object; ABOVE_RANGE when the object is too wide to be reached at that force.
 
         """
-        diameter = _real('object_diameter', object_diameter, '[m]')
-        force = _real('force', force, '[N]')
+        diameter = real_number('object_diameter', object_diameter, '[m]')
+        force = real_number('force', force, '[N]')
         if diameter <= 0.0:
             raise ValueError(f'`object_diameter` must be > 0 [m], got {diameter}')
         if force < 0.0:

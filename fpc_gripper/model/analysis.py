@@ -1,12 +1,13 @@
 """Derived outputs: the geometric circle fit of a midplane and the flexural rigidity formula."""
 
 from dataclasses import dataclass
+import functools
 
 import numpy as np
 from scipy.linalg import eig
 from scipy.optimize import least_squares
 
-__all__ = ['CircleFit', 'fit_circle', 'flexural_rigidity']
+__all__ = ['CircleFit', 'CircleFitted', 'fit_circle', 'flexural_rigidity']
 
 # Pratt's normalisation B^2 + C^2 - 4 A D = 1 as a quadratic form in (A, B, C, D).
 _PRATT = np.array([[0.0, 0.0, 0.0, -2.0],
@@ -120,6 +121,24 @@ def fit_circle(points):
         center = np.array([np.inf, np.inf])
     return CircleFit(curvature=float(2.0 * a / scale),
                      rmsd=float(scale * np.sqrt(np.mean(dist * dist))), center=center)
+
+
+class CircleFitted:
+    """Mixin of a result with `points`: curvature and RMSD of its circle, fitted on first use."""
+
+    @functools.cached_property
+    def _circle(self):
+        return fit_circle(self.points)
+
+    @property
+    def curvature(self):
+        """Signed curvature of the least-squares circle [1/m], > 0 curling towards -Z."""
+        return self._circle.curvature
+
+    @property
+    def fit_rmsd(self):
+        """RMSD of the samples from the fitted circle [m]."""
+        return self._circle.rmsd
 
 
 def flexural_rigidity(force, lever, displacement):

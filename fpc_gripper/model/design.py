@@ -8,6 +8,7 @@ import pathlib
 import numpy as np
 
 from .materials import check_emc_monotonic, default_emc_coefficients, Material
+from .validation import real_number
 
 __all__ = ['ActuatorDesign', 'PAPER_MATERIALS', 'safe_load_yaml']
 
@@ -47,15 +48,6 @@ def safe_load_yaml(text):
         key: sorted(value, key=lambda item: item[0] != 'tag:yaml.org,2002:int')
         for key, value in _Loader.yaml_implicit_resolvers.items()}
     return yaml.load(text, Loader=_Loader)
-
-
-def _real(name, value, unit):
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
-        raise TypeError(f'`{name}` must be a real number {unit}, got {value!r}')
-    value = float(value)
-    if not math.isfinite(value):
-        raise ValueError(f'`{name}` must be finite {unit}, got {value}')
-    return value
 
 
 @dataclass(frozen=True)
@@ -120,16 +112,16 @@ class ActuatorDesign:
 
     def __post_init__(self):
         for name in _LENGTHS:
-            object.__setattr__(self, name, _real(name, getattr(self, name), '[m]'))
-        object.__setattr__(self, 'prestrain', _real('prestrain', self.prestrain, '[-]'))
+            object.__setattr__(self, name, real_number(name, getattr(self, name), '[m]'))
+        object.__setattr__(self, 'prestrain', real_number('prestrain', self.prestrain, '[-]'))
         object.__setattr__(self, 'max_pressure',
-                           _real('max_pressure', self.max_pressure, '[Pa]'))
+                           real_number('max_pressure', self.max_pressure, '[Pa]'))
         coefficients = tuple(self.emc_coefficients) if np.ndim(self.emc_coefficients) else ()
         if len(coefficients) != 4:
             raise ValueError('`emc_coefficients` must be 4 numbers (a1, a2, a3, a4) [Pa], '
                              f'got {self.emc_coefficients!r}')
         object.__setattr__(self, 'emc_coefficients', tuple(
-            _real(f'emc_coefficients[{i}]', c, '[Pa]') for i, c in enumerate(coefficients)))
+            real_number(f'emc_coefficients[{i}]', c, '[Pa]') for i, c in enumerate(coefficients)))
         if not isinstance(self.ribs, (bool, np.bool_)):
             raise TypeError(f'`ribs` must be a bool, got {self.ribs!r}')
         object.__setattr__(self, 'ribs', bool(self.ribs))

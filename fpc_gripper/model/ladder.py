@@ -1,15 +1,15 @@
 """Model ladder beyond the CCM: a uniform arc (rung a) and a geometrically exact rod (rung d)."""
 
-import functools
 import math
 
 import numpy as np
 from scipy.linalg import cho_factor, cho_solve, eigh
 
-from .analysis import fit_circle
+from .analysis import CircleFitted
 from .design import ActuatorDesign
 from .section_law import station_layout
-from .solver import _finite, PRESSURE_MODELS, RigidityResult, SolverStatus
+from .solver import PRESSURE_MODELS, RigidityResult, SolverStatus
+from .validation import real_number
 
 __all__ = ['ArcSolver', 'RodSolver', 'LadderResult', 'RodResult', 'ArcResult']
 
@@ -31,7 +31,7 @@ _ARC_X, _ARC_WX = np.polynomial.legendre.leggauss(48)
 _ARC_T, _ARC_W = 0.5 * (_ARC_X + 1.0), 0.5 * _ARC_WX
 
 
-class LadderResult:
+class LadderResult(CircleFitted):
     """
     Equilibrium of one finger from a ladder rung, with the fields of `CCMResult`.
 
@@ -92,20 +92,6 @@ class LadderResult:
         self.nodes = out['nodes']
         self.energy = out['energy']
 
-    @functools.cached_property
-    def _circle(self):
-        return fit_circle(self.points)
-
-    @property
-    def curvature(self):
-        """Signed curvature of the least-squares circle [1/m], > 0 curling towards -Z."""
-        return self._circle.curvature
-
-    @property
-    def fit_rmsd(self):
-        """RMSD of the samples from the fitted circle [m]."""
-        return self._circle.rmsd
-
     def __repr__(self):
         return (f'{type(self).__name__}(success={self.success}, status={self.status.name}, '
                 f'iterations={self.iterations}, tip={self.tip.round(6).tolist()})')
@@ -130,13 +116,13 @@ def _check_common(design, pressure_model, samples):
 
 
 def _check_solve(pressure, tip_force):
-    pressure = _finite('pressure', pressure, '[Pa]')
+    pressure = real_number('pressure', pressure, '[Pa]')
     if pressure < 0.0:
         raise ValueError(f'`pressure` must be >= 0 (gauge) [Pa], got {pressure}')
     if np.shape(tip_force) != (2,):
         raise ValueError(f'`tip_force` must be (f0, p0) [N], got {tip_force!r}')
-    force = np.array([_finite('tip_force[0]', tip_force[0], '[N]'),
-                      _finite('tip_force[1]', tip_force[1], '[N]')])
+    force = np.array([real_number('tip_force[0]', tip_force[0], '[N]'),
+                      real_number('tip_force[1]', tip_force[1], '[N]')])
     return pressure, force
 
 
@@ -219,7 +205,7 @@ class _LadderSolver:
         """
         if axis not in ('x', 'z'):
             raise ValueError(f"`axis` must be 'x' or 'z', got {axis!r}")
-        delta = _finite('displacement', displacement, '[m]')
+        delta = real_number('displacement', displacement, '[m]')
         if delta <= 0.0:
             raise ValueError(f'`displacement` must be > 0 [m], got {delta}')
         unloaded = self.solve(pressure, (0.0, 0.0), initial=initial)
@@ -461,7 +447,7 @@ class RodSolver(_LadderSolver):
         if isinstance(degree, bool) or not isinstance(degree, (int, np.integer)) \
                 or degree < 2:
             raise ValueError(f'`degree` must be an integer >= 2, got {degree!r}')
-        max_element_length = _finite('max_element_length', max_element_length, '[m]')
+        max_element_length = real_number('max_element_length', max_element_length, '[m]')
         if max_element_length <= 0.0:
             raise ValueError(f'`max_element_length` must be > 0 [m], got {max_element_length}')
         self.design = design

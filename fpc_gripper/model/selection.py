@@ -7,12 +7,14 @@ import math
 import pathlib
 
 import numpy as np
+from scipy.interpolate import PchipInterpolator
 
 from .design import ActuatorDesign
 from .ladder import ArcSolver, RodSolver
 from .section import uniform_edges
 from .section_law import station_layout
-from .solver import _finite, CCMSolver, PRESSURE_MODELS
+from .solver import CCMSolver, PRESSURE_MODELS
+from .validation import real_number
 
 __all__ = ['Scene', 'ModelChoice', 'RUNGS', 'choose_model', 'load_error_model', 'make_solver',
            'a_posteriori_error', 'solve_auto_refine', 'RefinedResult', 'aligned_edges',
@@ -51,14 +53,14 @@ class Scene:
         if not isinstance(self.design, ActuatorDesign):
             raise TypeError(f'`design` must be an ActuatorDesign, got '
                             f'{type(self.design).__name__}')
-        pressure = _finite('pressure', self.pressure, '[Pa]')
+        pressure = real_number('pressure', self.pressure, '[Pa]')
         if pressure < 0.0:
             raise ValueError(f'`pressure` must be >= 0 (gauge) [Pa], got {pressure}')
         object.__setattr__(self, 'pressure', pressure)
         if np.shape(self.tip_force) != (2,):
             raise ValueError(f'`tip_force` must be (f0, p0) [N], got {self.tip_force!r}')
         object.__setattr__(self, 'tip_force', tuple(
-            _finite(f'tip_force[{i}]', f, '[N]') for i, f in enumerate(self.tip_force)))
+            real_number(f'tip_force[{i}]', f, '[N]') for i, f in enumerate(self.tip_force)))
         if self.pressure_model not in PRESSURE_MODELS:
             raise ValueError(f'`pressure_model` must be one of {sorted(PRESSURE_MODELS)}, '
                              f'got {self.pressure_model!r}')
@@ -214,7 +216,7 @@ def choose_model(scene, tolerance, error_model=None):
     """
     if not isinstance(scene, Scene):
         raise TypeError(f'`scene` must be a Scene, got {type(scene).__name__}')
-    tolerance = _finite('tolerance', tolerance, '[m]')
+    tolerance = real_number('tolerance', tolerance, '[m]')
     if tolerance <= 0.0:
         raise ValueError(f'`tolerance` must be > 0 [m], got {tolerance}')
     model = load_error_model() if error_model is None else error_model
@@ -397,8 +399,8 @@ class AdaptiveSolver:
     `tolerance` for that pressure and tip force, and doubles N while a segment
     breaks the small-rotation rule or the solve fails. Unloaded scenes get
     coarser models than loaded, strongly curled ones. The choice is the one
-    `choose_model` makes, computed from a warm-started arc solve and cached per
-    cell of the error model.
+    `choose_model` makes (see `choose` for how its feature is obtained cheaply),
+    cached per cell of the error model.
 
     Parameters
     ----------
@@ -422,7 +424,7 @@ class AdaptiveSolver:
                  error_model=None):
         if not isinstance(design, ActuatorDesign):
             raise TypeError(f'`design` must be an ActuatorDesign, got {type(design).__name__}')
-        self.tolerance = _finite('tolerance', tolerance, '[m]')
+        self.tolerance = real_number('tolerance', tolerance, '[m]')
         if self.tolerance <= 0.0:
             raise ValueError(f'`tolerance` must be > 0 [m], got {self.tolerance}')
         if pressure_model not in PRESSURE_MODELS:
@@ -434,28 +436,56 @@ class AdaptiveSolver:
         self._model = load_error_model() if error_model is None else error_model
         self._arc = ArcSolver(design, pressure_model=pressure_model)
         self._arc_state = None
+        self._turning_table = self._unloaded_turning_table()
+        self._loaded_turning = {}
         self._solvers = {}
         self._choices = {}
         self.last_choice = None
 
     def choose(self, pressure, tip_force):
         """
-        Return the ModelChoice for a scene: exactly what `choose_model` picks.
+        Return the ModelChoice for a scene, as `choose_model` makes it.
 
-        The scene's feature comes from an arc solve warm-started from the previous
-        one, and choices are cached per error-model cell, so a sweep pays for one
-        short arc solve per step and one choice per cell.
+        The scene's feature is the arc rung's turning |kappa L|. Unloaded, it is
+        read from a table of arc solves over the error model's pressure range
+        (built with the solver, every 5 kPa, interpolated by PCHIP; the
+        interpolation error only matters within that distance of a bin edge).
+        Loaded, the arc is solved, warm-started, and cached per 1 kPa and 5 mN.
+        Choices are cached per error-model cell.
         """
         scene = Scene(self.design, pressure, tuple(tip_force), self.pressure_model)
-        arc = self._arc.solve(scene.pressure, scene.tip_force, initial=self._arc_state)
-        if not arc.success:
-            arc = self._arc.solve(scene.pressure, scene.tip_force)
-        self._arc_state = arc if arc.success else None
-        cell = _scene_bin(self._model, scene, abs(float(arc.beta[0])))
+        cell = _scene_bin(self._model, scene, self._turning(scene))
         choice = self._choices.get(cell)
         if choice is None:
             choice = self._choices[cell] = _choose(self._model, cell, self.tolerance)
         return choice
+
+    def _unloaded_turning_table(self, step=5e3):
+        """PCHIP of the unloaded arc's signed turning over the error model's pressures [rad]."""
+        top = self._model['ranges']['pressure'][1]
+        grid = np.linspace(0.0, top, int(round(top / step)) + 1)
+        state, values = None, []
+        for p in grid:
+            state = self._arc.solve(p, (0.0, 0.0), initial=state)
+            if not state.success:
+                state = self._arc.solve(p, (0.0, 0.0))
+            # Signed: |beta| has a kink where the finger passes flat.
+            values.append(float(state.beta[0]))
+        return PchipInterpolator(grid, values)
+
+    def _turning(self, scene):
+        """Turning |kappa L| of the arc rung for a scene [rad]."""
+        if scene.load == 0.0 and scene.pressure <= self._turning_table.x[-1]:
+            return abs(float(self._turning_table(scene.pressure)))
+        key = (round(scene.pressure / 1e3), round(scene.tip_force[0] / 5e-3),
+               round(scene.tip_force[1] / 5e-3))
+        if key not in self._loaded_turning:
+            arc = self._arc.solve(scene.pressure, scene.tip_force, initial=self._arc_state)
+            if not arc.success:
+                arc = self._arc.solve(scene.pressure, scene.tip_force)
+            self._arc_state = arc if arc.success else None
+            self._loaded_turning[key] = abs(float(arc.beta[0]))
+        return self._loaded_turning[key]
 
     def solver_for(self, rung, n_segments):
         """The (cached) solver of a rung and N."""

@@ -7,12 +7,13 @@ import math
 import numpy as np
 from scipy.linalg import eigh
 
-from .analysis import fit_circle, flexural_rigidity
+from .analysis import CircleFitted, flexural_rigidity
 from .design import ActuatorDesign
 from .energy import load_derivatives, load_energy, segment_derivatives, segment_energy
 from .kinematics import (consistent_strain_map, from_scaled, midplane_samples, node_positions,
                          to_scaled)
 from .section import build_segments, uniform_edges
+from .validation import real_number
 
 __all__ = ['CCMSolver', 'CCMResult', 'RigidityResult', 'SolverStatus', 'PRESSURE_MODELS']
 
@@ -53,7 +54,7 @@ _MESSAGES = {
 }
 
 
-class CCMResult:
+class CCMResult(CircleFitted):
     """
     Equilibrium of one finger, with OptimizeResult-like fields.
 
@@ -138,20 +139,6 @@ class CCMResult:
         return self.coefficients.ravel()
 
     @functools.cached_property
-    def _circle(self):
-        return fit_circle(self.points)
-
-    @property
-    def curvature(self):
-        """Signed curvature of the least-squares circle [1/m], > 0 curling towards -Z."""
-        return self._circle.curvature
-
-    @property
-    def fit_rmsd(self):
-        """RMSD of the samples from the fitted circle [m]."""
-        return self._circle.rmsd
-
-    @functools.cached_property
     def energy(self):
         """Total potential at this state [J]."""
         return self.solver._total_energy(self.q, self.pressure, self.point_loads)
@@ -197,15 +184,6 @@ class RigidityResult:
     def __repr__(self):
         return (f'RigidityResult(axis={self.axis!r}, value={self.value:.6g}, '
                 f'force={self.force:.6g}, lever={self.lever:.6g}, success={self.success})')
-
-
-def _finite(name, value, unit):
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
-        raise TypeError(f'`{name}` must be a real number {unit}, got {value!r}')
-    value = float(value)
-    if not math.isfinite(value):
-        raise ValueError(f'`{name}` must be finite {unit}, got {value}')
-    return value
 
 
 class CCMSolver:
@@ -268,7 +246,7 @@ class CCMSolver:
         self.pressure_model = pressure_model
         self.pressure_coefficient = PRESSURE_MODELS[pressure_model]
         length = design.free_length
-        self.load_points = tuple(_finite('load_points', s, '[m]') for s in load_points)
+        self.load_points = tuple(real_number('load_points', s, '[m]') for s in load_points)
         for s in self.load_points:
             if not 0.0 < s <= length:
                 raise ValueError(f'`load_points` must lie in (0, {length}] [m], got {s}')
@@ -320,15 +298,15 @@ class CCMSolver:
     def _loads(self, tip_force, point_loads):
         """Convert the tip force and (s, fx, fz) point loads to (node index, force) pairs."""
         loads = []
-        f0 = _finite('tip_force[0]', tip_force[0], '[N]')
-        p0 = _finite('tip_force[1]', tip_force[1], '[N]')
+        f0 = real_number('tip_force[0]', tip_force[0], '[N]')
+        p0 = real_number('tip_force[1]', tip_force[1], '[N]')
         if f0 or p0:
             loads.append((self.n_segments, np.array([f0, p0])))
         for item in point_loads:
             if len(item) != 3:
                 raise ValueError(f'`point_loads` items must be (s [m], fx [N], fz [N]), '
                                  f'got {item!r}')
-            s, fx, fz = (_finite('point_loads', v, '[m, N]') for v in item)
+            s, fx, fz = (real_number('point_loads', v, '[m, N]') for v in item)
             node = int(np.argmin(np.abs(self.segments.edges - s)))
             if abs(self.segments.edges[node] - s) > 1e-12 or node == 0:
                 raise ValueError(f'point load at s = {s} [m] needs a segment edge there; '
@@ -456,7 +434,7 @@ class CCMSolver:
         Zhou, Headings, Dapino (2022), eq. (21).
 
         """
-        pressure = _finite('pressure', pressure, '[Pa]')
+        pressure = real_number('pressure', pressure, '[Pa]')
         if pressure < 0.0:
             raise ValueError(f'`pressure` must be >= 0 (gauge) [Pa], got {pressure}')
         if np.shape(tip_force) != (2,):
@@ -535,7 +513,7 @@ class CCMSolver:
         """
         if axis not in ('x', 'z'):
             raise ValueError(f"`axis` must be 'x' or 'z', got {axis!r}")
-        delta = _finite('displacement', displacement, '[m]')
+        delta = real_number('displacement', displacement, '[m]')
         if delta <= 0.0:
             raise ValueError(f'`displacement` must be > 0 [m], got {delta}')
         unloaded = self.solve(pressure, (0.0, 0.0), initial=initial)

@@ -29,8 +29,6 @@ from diagnostic_msgs.msg import DiagnosticArray
 from diagnostic_msgs.msg import DiagnosticStatus
 from diagnostic_msgs.msg import KeyValue
 from geometry_msgs.msg import WrenchStamped
-from rcl_interfaces.msg import FloatingPointRange
-from rcl_interfaces.msg import IntegerRange
 from rcl_interfaces.msg import ParameterDescriptor
 from rcl_interfaces.msg import SetParametersResult
 import rclpy
@@ -55,6 +53,9 @@ from fpc_gripper.control.inverse import InverseModel
 from fpc_gripper.io.config import default_gripper_config_path
 from fpc_gripper.io.config import load_gripper_config
 from fpc_gripper.model import PRESSURE_MODELS
+from fpc_gripper.nodes.parameters import declare_table
+from fpc_gripper.nodes.parameters import float_range
+from fpc_gripper.nodes.parameters import int_range
 
 __all__ = ['GripperController', 'main']
 
@@ -69,10 +70,6 @@ _LAW_PARAMETERS = ('max_pressure', 'slew_rate_pa_s', 'approach_rate_pa_s', 'kp',
                    'safe_state', 'contact_threshold_n')
 
 
-def _float_range(low, high):
-    return [FloatingPointRange(from_value=float(low), to_value=float(high), step=0.0)]
-
-
 def _parameter_table(config_max_pressure):
     """Return ``(name, default, description, extra descriptor fields)`` of every parameter."""
     defaults = ControllerConfig()
@@ -80,51 +77,50 @@ def _parameter_table(config_max_pressure):
         ('gripper_config', str(default_gripper_config_path()),
          'Gripper YAML: fingers, palm radius, pressure limit.', {'read_only': True}),
         ('n_segments', 8, 'CCM segments of the finger model.',
-         {'read_only': True, 'integer_range': [IntegerRange(from_value=1, to_value=64,
-                                                            step=1)]}),
+         {'read_only': True, 'integer_range': int_range(1, 64)}),
         ('pressure_model', 'adiabatic', f'Pressure work model, one of {list(PRESSURE_MODELS)}.',
          {'read_only': True, 'additional_constraints': f'one of {list(PRESSURE_MODELS)}'}),
         ('max_pressure', config_max_pressure,
          'Largest command [Pa gauge]; at most the gripper config max_pressure.',
-         {'floating_point_range': _float_range(0.0, config_max_pressure)}),
+         {'floating_point_range': float_range(0.0, config_max_pressure)}),
         ('slew_rate_pa_s', defaults.slew_rate_pa_s, 'Command slew limit [Pa/s].',
-         {'floating_point_range': _float_range(1.0e3, 1.0e8)}),
+         {'floating_point_range': float_range(1.0e3, 1.0e8)}),
         ('approach_rate_pa_s', defaults.approach_rate_pa_s,
          'Slew limit while closing on an object and pressing it [Pa/s].',
-         {'floating_point_range': _float_range(1.0e3, 1.0e8)}),
+         {'floating_point_range': float_range(1.0e3, 1.0e8)}),
         ('kp', defaults.kp, 'Proportional gain on the aperture error in Pa [-].',
-         {'floating_point_range': _float_range(0.0, 100.0)}),
+         {'floating_point_range': float_range(0.0, 100.0)}),
         ('ki', defaults.ki, 'Integral gain on the aperture error in Pa [1/s].',
-         {'floating_point_range': _float_range(0.0, 100.0)}),
+         {'floating_point_range': float_range(0.0, 100.0)}),
         ('kp_force', defaults.kp_force, 'Proportional gain on the force error in Pa [-].',
-         {'floating_point_range': _float_range(0.0, 100.0)}),
+         {'floating_point_range': float_range(0.0, 100.0)}),
         ('ki_force', defaults.ki_force, 'Integral gain on the force error in Pa [1/s].',
-         {'floating_point_range': _float_range(0.0, 100.0)}),
+         {'floating_point_range': float_range(0.0, 100.0)}),
         ('control_rate_hz', 50.0, 'Control loop rate [Hz].',
-         {'floating_point_range': _float_range(1.0, 1000.0)}),
+         {'floating_point_range': float_range(1.0, 1000.0)}),
         ('goal_tolerance_m', defaults.goal_tolerance_m, 'Aperture goal tolerance [m].',
-         {'floating_point_range': _float_range(1.0e-5, 0.05)}),
+         {'floating_point_range': float_range(1.0e-5, 0.05)}),
         ('force_tolerance', defaults.force_tolerance,
          'Relative contact-force goal tolerance [-].',
-         {'floating_point_range': _float_range(0.0, 1.0)}),
+         {'floating_point_range': float_range(0.0, 1.0)}),
         ('settle_time_s', defaults.settle_time_s,
          'Time within tolerance before a goal is reached [s].',
-         {'floating_point_range': _float_range(0.0, 60.0)}),
+         {'floating_point_range': float_range(0.0, 60.0)}),
         ('stall_timeout_s', defaults.stall_timeout_s,
          'A goal not reached after this long is reported stalled [s].',
-         {'floating_point_range': _float_range(0.1, 3600.0)}),
+         {'floating_point_range': float_range(0.1, 3600.0)}),
         ('feedback_timeout_s', defaults.feedback_timeout_s,
          'Pressure feedback older than this is lost: safe state and ERROR [s].',
-         {'floating_point_range': _float_range(0.01, 60.0)}),
+         {'floating_point_range': float_range(0.01, 60.0)}),
         ('safe_state', defaults.safe_state,
          "On lost feedback: 'vent' commands 0 Pa gauge, 'hold' keeps the last command.",
          {'additional_constraints': f'one of {list(SAFE_STATES)}'}),
         ('contact_threshold_n', defaults.contact_threshold_n,
          'Tip force along +Z above which a finger is in contact [N].',
-         {'floating_point_range': _float_range(1.0e-4, 10.0)}),
+         {'floating_point_range': float_range(1.0e-4, 10.0)}),
         ('atmospheric_pressure', 101325.0,
          'Atmospheric pressure [Pa]: absolute = gauge + atmospheric_pressure.',
-         {'floating_point_range': _float_range(3.0e4, 1.2e5)}),
+         {'floating_point_range': float_range(3.0e4, 1.2e5)}),
     )
 
 
@@ -152,9 +148,7 @@ class GripperController(Node):
                                ParameterDescriptor(description='Gripper YAML.', read_only=True))
         config = load_gripper_config(self.get_parameter('gripper_config').value)
         self._gripper = config
-        for name, default, description, extra in _parameter_table(config.max_pressure)[1:]:
-            self.declare_parameter(
-                name, default, ParameterDescriptor(description=description, **extra))
+        declare_table(self, _parameter_table(config.max_pressure)[1:])
         # Overrides bypass the on-set callback: check the starting values the same way.
         result = self._validate_parameters([self.get_parameter(n) for n in _LAW_PARAMETERS])
         if not result.successful:

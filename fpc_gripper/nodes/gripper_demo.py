@@ -13,7 +13,6 @@ import time
 from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import WrenchStamped
 from nav_msgs.msg import Path
-from rcl_interfaces.msg import FloatingPointRange
 from rcl_interfaces.msg import ParameterDescriptor
 import rclpy
 from rclpy.executors import ExternalShutdownException
@@ -35,6 +34,7 @@ from fpc_gripper.control.virtual_object import VirtualCylinder
 from fpc_gripper.io.config import default_gripper_config_path
 from fpc_gripper.io.config import load_gripper_config
 from fpc_gripper.io.messages import gripper_topics
+from fpc_gripper.nodes.parameters import float_range
 
 __all__ = ['Phase', 'SessionScript', 'VirtualObjectNode', 'main', 'make_chart', 'run_session']
 
@@ -64,7 +64,7 @@ class VirtualObjectNode(Node):
 
     def __init__(self, node_name='virtual_object', **kwargs):
         super().__init__(node_name, **kwargs)
-        positive = [FloatingPointRange(from_value=1e-3, to_value=0.5, step=0.0)]
+        positive = float_range(1e-3, 0.5)
         self.declare_parameter('gripper_config', str(default_gripper_config_path()),
                                ParameterDescriptor(description='Gripper YAML.', read_only=True))
         self.declare_parameter('object_diameter', 0.040, ParameterDescriptor(
@@ -75,11 +75,10 @@ class VirtualObjectNode(Node):
             read_only=True, additional_constraints="one of ['exact', 'penalty']"))
         self.declare_parameter('stiffness_n_m', 200.0, ParameterDescriptor(
             description='Surface stiffness of the penalty method [N/m].', read_only=True,
-            floating_point_range=[FloatingPointRange(from_value=1.0, to_value=1e6, step=0.0)]))
+            floating_point_range=float_range(1.0, 1e6)))
         self.declare_parameter('atmospheric_pressure', 101325.0, ParameterDescriptor(
             description='[Pa]: gauge = absolute - atmospheric_pressure.',
-            floating_point_range=[FloatingPointRange(from_value=3e4, to_value=1.2e5,
-                                                     step=0.0)]))
+            floating_point_range=float_range(3e4, 1.2e5)))
         param = self.get_parameter
         config = load_gripper_config(param('gripper_config').value)
         self._names = config.names

@@ -6,7 +6,7 @@ import struct
 import sys
 import time
 
-from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor, SetParametersResult
+from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 import rclpy
 from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException
@@ -16,6 +16,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from ..io.mcap_writer import (normalize_type_name, Rosbag2McapWriter, SchemaNotFoundError,
                               type_description_hash)
 from ..io.messages import gripper_topics
+from .parameters import float_range
 
 __all__ = ['McapRecorder', 'main']
 
@@ -105,8 +106,8 @@ class McapRecorder(Node):
     # -- parameters -----------------------------------------------------------------------
 
     def _declare_parameters(self):
-        positive = FloatingPointRange(from_value=0.001, to_value=3600.0)
-        non_negative = FloatingPointRange(from_value=0.0, to_value=1.0e9)
+        positive = float_range(0.001, 3600.0)
+        non_negative = float_range(0.0, 1.0e9)
         self.declare_parameter('output_path', '', ParameterDescriptor(
             description='MCAP file (*.mcap), or a directory for split files '
                         '(default: fpc_gripper_<date>.mcap in the working directory)',
@@ -117,18 +118,18 @@ class McapRecorder(Node):
             read_only=True))
         self.declare_parameter('flush_period_s', 1.0, ParameterDescriptor(
             description='Longest time a received message waits before it is on disk '
-                        'in a completed chunk [s]', floating_point_range=[positive]))
+                        'in a completed chunk [s]', floating_point_range=positive))
         self.declare_parameter('max_file_size_mb', 0.0, ParameterDescriptor(
             description='Split to a new file at this size [MiB]; 0 never splits',
-            floating_point_range=[non_negative]))
+            floating_point_range=non_negative))
         self.declare_parameter('max_duration_s', 0.0, ParameterDescriptor(
             description='Split to a new file after this much recording time [s]; 0 never',
-            floating_point_range=[non_negative]))
+            floating_point_range=non_negative))
         self.declare_parameter('compression', 'zstd', ParameterDescriptor(
             description='Chunk compression: zstd, lz4 or none', read_only=True))
         self.declare_parameter('discovery_period_s', 0.5, ParameterDescriptor(
             description='Period of the search for publishers of topics not yet recorded [s]',
-            floating_point_range=[positive], read_only=True))
+            floating_point_range=positive, read_only=True))
         self.declare_parameter('gripper_config', '', ParameterDescriptor(
             description='Gripper configuration YAML whose fingers give the default topics '
                         '(default: the package default)', read_only=True))

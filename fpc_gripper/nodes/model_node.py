@@ -11,9 +11,6 @@ from diagnostic_msgs.msg import KeyValue
 from geometry_msgs.msg import Vector3Stamped
 from geometry_msgs.msg import WrenchStamped
 from nav_msgs.msg import Path
-from rcl_interfaces.msg import FloatingPointRange
-from rcl_interfaces.msg import IntegerRange
-from rcl_interfaces.msg import ParameterDescriptor
 from rcl_interfaces.msg import SetParametersResult
 import rclpy
 from rclpy.clock import Clock
@@ -45,6 +42,9 @@ from fpc_gripper.model import AdaptiveSolver, CCMSolver
 from fpc_gripper.model import PRESSURE_MODELS
 from fpc_gripper.nodes.model_core import Level
 from fpc_gripper.nodes.model_core import ModelCore
+from fpc_gripper.nodes.parameters import declare_table
+from fpc_gripper.nodes.parameters import float_range
+from fpc_gripper.nodes.parameters import int_range
 
 PRESSURE_INPUTS = ('command', 'measured')
 _CHOICES = {'pressure_model': tuple(PRESSURE_MODELS), 'pressure_input': PRESSURE_INPUTS}
@@ -64,14 +64,6 @@ _LEVELS = {Level.OK: DiagnosticStatus.OK, Level.WARN: DiagnosticStatus.WARN,
            Level.ERROR: DiagnosticStatus.ERROR}
 _VALID_COLOR = (0.1, 0.7, 0.2, 1.0)
 _INVALID_COLOR = (1.0, 0.55, 0.0, 1.0)
-
-
-def _float_range(low, high):
-    return [FloatingPointRange(from_value=float(low), to_value=float(high), step=0.0)]
-
-
-def _int_range(low, high):
-    return [IntegerRange(from_value=int(low), to_value=int(high), step=1)]
 
 
 class _SlowOutput:
@@ -105,28 +97,28 @@ def _parameter_table():
          'Tip-position tolerance against the geometrically exact rod [m]: per scene the node '
          'uses the cheapest model that meets it (fpc_gripper.model.AdaptiveSolver), refining '
          'when a segment passes 45 degrees. 0 uses the paper CCM with a fixed n_segments.',
-         {'floating_point_range': _float_range(0.0, 0.05)}),
+         {'floating_point_range': float_range(0.0, 0.05)}),
         ('n_segments', 8, 'Number N of CCM segments per finger when tolerance is 0; a change '
          'rebuilds the solvers.',
-         {'integer_range': _int_range(1, 64)}),
+         {'integer_range': int_range(1, 64)}),
         ('pressure_model', 'adiabatic',
          "Pressure work: 'adiabatic' (k_p = 1/(gamma - 1), paper eq. 20) or 'isobaric' "
          '(k_p = 1); a change rebuilds the solvers.',
          {'additional_constraints': f'one of {list(PRESSURE_MODELS)}'}),
         ('max_rate_hz', 200.0,
          'Solve-rate cap per finger [Hz]; newer input replaces pending input (latest wins).',
-         {'floating_point_range': _float_range(1.0, 10000.0)}),
+         {'floating_point_range': float_range(1.0, 10000.0)}),
         ('pressure_input', 'command',
          "'command': finger_<i>/pressure_command (reliable); 'measured': finger_<i>/pressure "
          '(sensor data QoS). Both absolute [Pa].',
          {'read_only': True, 'additional_constraints': f'one of {list(PRESSURE_INPUTS)}'}),
         ('atmospheric_pressure', 101325.0,
          'Atmospheric pressure [Pa]: gauge = absolute - atmospheric_pressure.',
-         {'floating_point_range': _float_range(3.0e4, 1.2e5)}),
+         {'floating_point_range': float_range(3.0e4, 1.2e5)}),
         ('stale_after_s', 1.0,
          'Inputs whose header stamp is older than this against the node clock are rejected '
          '[s]; 0 disables. Unstamped (zero) headers are never stale.',
-         {'floating_point_range': _float_range(0.0, 3600.0)}),
+         {'floating_point_range': float_range(0.0, 3600.0)}),
     )
 
 
@@ -175,9 +167,7 @@ class ModelNode(Node):
             raise
 
     def _set_up(self, solver_factory):
-        for name, default, description, extra in _parameter_table():
-            self.declare_parameter(
-                name, default, ParameterDescriptor(description=description, **extra))
+        declare_table(self, _parameter_table())
         # Overrides bypass the on-set callback: check the starting values the same way.
         result = self._validate_parameters([self.get_parameter(n)
                                             for n, *_ in _parameter_table()])

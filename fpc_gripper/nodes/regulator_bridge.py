@@ -6,9 +6,6 @@ import math
 from diagnostic_msgs.msg import DiagnosticArray
 from diagnostic_msgs.msg import DiagnosticStatus
 from diagnostic_msgs.msg import KeyValue
-from rcl_interfaces.msg import FloatingPointRange
-from rcl_interfaces.msg import IntegerRange
-from rcl_interfaces.msg import ParameterDescriptor
 from rcl_interfaces.msg import SetParametersResult
 import rclpy
 from rclpy.executors import ExternalShutdownException
@@ -23,6 +20,9 @@ from sensor_msgs.msg import FluidPressure
 
 from fpc_gripper.io.config import default_gripper_config_path
 from fpc_gripper.io.config import load_gripper_config
+from fpc_gripper.nodes.parameters import declare_table
+from fpc_gripper.nodes.parameters import float_range
+from fpc_gripper.nodes.parameters import int_range
 from fpc_gripper.regulators.base import BackendFault
 from fpc_gripper.regulators.factory import BACKEND_KINDS
 from fpc_gripper.regulators.factory import make_backend
@@ -45,14 +45,6 @@ _RECONNECT_S = 1.0
 _WATCHDOG_WORDS = {SupervisorMode.IDLE: 'waiting', SupervisorMode.WATCHDOG: 'expired'}
 
 
-def _float_range(low, high):
-    return [FloatingPointRange(from_value=float(low), to_value=float(high), step=0.0)]
-
-
-def _int_range(low, high):
-    return [IntegerRange(from_value=int(low), to_value=int(high), step=1)]
-
-
 def _parameter_table():
     """Return ``(name, default, description, extra descriptor fields)`` of every parameter."""
     return (
@@ -63,42 +55,42 @@ def _parameter_table():
         ('modbus_config', '', 'Modbus register-map YAML (backend modbus).', {}),
         ('modbus_host', '', 'Overrides connection.host of modbus_config; empty keeps it.', {}),
         ('modbus_port', 0, 'Overrides connection.port of modbus_config; 0 keeps it.',
-         {'integer_range': _int_range(0, 65535)}),
+         {'integer_range': int_range(0, 65535)}),
         ('max_pressure', 4.0e5,
          'Largest setpoint [Pa gauge]; also capped by the gripper config max_pressure.',
-         {'floating_point_range': _float_range(0.0, 1.0e6)}),
+         {'floating_point_range': float_range(0.0, 1.0e6)}),
         ('rate_limit_pa_s', 1.0e6, 'Setpoint slew limit [Pa/s].',
-         {'floating_point_range': _float_range(1.0e3, 1.0e9)}),
+         {'floating_point_range': float_range(1.0e3, 1.0e9)}),
         ('command_timeout_s', 0.5, 'Command watchdog period [s].',
-         {'floating_point_range': _float_range(0.01, 3600.0)}),
+         {'floating_point_range': float_range(0.01, 3600.0)}),
         ('safe_state', 'vent',
          "Watchdog/fault behaviour: 'hold' keeps the last setpoint, 'vent' goes to 0 gauge.",
          {'additional_constraints': f'one of {list(SAFE_STATES)}'}),
         ('publish_rate_hz', 50.0, 'Control and pressure publishing rate [Hz].',
-         {'floating_point_range': _float_range(1.0, 1000.0)}),
+         {'floating_point_range': float_range(1.0, 1000.0)}),
         ('diagnostics_rate_hz', 2.0,
          'Diagnostics rate [Hz]; a change of state is published at once.',
-         {'floating_point_range': _float_range(0.1, 100.0)}),
+         {'floating_point_range': float_range(0.1, 100.0)}),
         ('atmospheric_pressure', 101325.0,
          'Atmospheric pressure [Pa]: gauge = absolute - atmospheric_pressure.',
-         {'floating_point_range': _float_range(3.0e4, 1.2e5)}),
+         {'floating_point_range': float_range(3.0e4, 1.2e5)}),
         ('auto_activate', False, 'Configure and activate at start-up.', {'read_only': True}),
         ('sim_time_constant_s', 0.15, 'Simulated regulator first-order time constant [s].',
-         {'floating_point_range': _float_range(1.0e-3, 100.0)}),
+         {'floating_point_range': float_range(1.0e-3, 100.0)}),
         ('sim_slew_rate_pa_s', 2.0e6, 'Simulated regulator slew limit [Pa/s].',
-         {'floating_point_range': _float_range(1.0e3, 1.0e10)}),
+         {'floating_point_range': float_range(1.0e3, 1.0e10)}),
         ('sim_deadband_pa', 500.0, 'Simulated regulator deadband [Pa].',
-         {'floating_point_range': _float_range(0.0, 1.0e5)}),
+         {'floating_point_range': float_range(0.0, 1.0e5)}),
         ('sim_noise_std_pa', 300.0, 'Simulated readback noise standard deviation [Pa].',
-         {'floating_point_range': _float_range(0.0, 1.0e5)}),
+         {'floating_point_range': float_range(0.0, 1.0e5)}),
         ('sim_max_output_pa', 7.0e5, 'Simulated supply-limited output [Pa gauge].',
-         {'floating_point_range': _float_range(1.0e3, 1.0e7)}),
+         {'floating_point_range': float_range(1.0e3, 1.0e7)}),
         ('sim_full_scale_pa', 1.0e6, 'Simulated readback full scale [Pa gauge].',
-         {'floating_point_range': _float_range(1.0e3, 1.0e7)}),
+         {'floating_point_range': float_range(1.0e3, 1.0e7)}),
         ('sim_adc_bits', 12, 'Simulated readback resolution [bit].',
-         {'integer_range': _int_range(1, 32)}),
+         {'integer_range': int_range(1, 32)}),
         ('sim_seed', 0, 'Seed of the simulated readback noise.',
-         {'integer_range': _int_range(0, 2 ** 31 - 1)}),
+         {'integer_range': int_range(0, 2 ** 31 - 1)}),
     )
 
 
@@ -127,11 +119,8 @@ class RegulatorBridge(LifecycleNode):
     def __init__(self, node_name='regulator_bridge', *, backend=None,
                  auto_activate_default=False, **kwargs):
         super().__init__(node_name, **kwargs)
-        for name, default, description, extra in _parameter_table():
-            if name == 'auto_activate':
-                default = bool(auto_activate_default)
-            self.declare_parameter(
-                name, default, ParameterDescriptor(description=description, **extra))
+        declare_table(self, _parameter_table(),
+                      defaults={'auto_activate': bool(auto_activate_default)})
         self._injected_backend = backend
         self._backend = None
         self._backend_kind = 'injected' if backend is not None else ''
