@@ -104,19 +104,52 @@ class CCMResult(CircleFitted):
         self.pressure = float(pressure)
         self.tip_force = tuple(float(f) for f in tip_force)
         self.point_loads = tuple(loads)
-        lengths = solver.segments.lengths
-        self.coefficients = from_scaled(q, lengths)
-        self.nodes, self.theta, self.beta = node_positions(q, lengths)
-        self.tip = self.nodes[-1].copy()
         self.rotation_measure = np.abs(2.0 * q[:, 3])
         self.valid = bool(np.all(self.rotation_measure < 1.0))
-        self.message = _MESSAGES[self.status].format(
-            grad=gradient, gtol=solver.gtol, step=step, xtol=solver.xtol,
-            iterations=iterations, min_eig=min_eig, fraction=fraction)
+        # Derived fields are built on first use: a controller polling tips pays for
+        # neither the message nor the coefficients it does not read.
+        self._message_args = dict(grad=gradient, gtol=solver.gtol, step=step,
+                                  xtol=solver.xtol, iterations=iterations, min_eig=min_eig,
+                                  fraction=fraction)
+
+    @functools.cached_property
+    def message(self):
+        """What happened, with the figures behind `status`."""
+        text = _MESSAGES[self.status].format(**self._message_args)
         if self.success and not self.valid:
             worst = int(np.argmax(self.rotation_measure))
-            self.message += (f'; segment {worst} breaks the small-rotation rule '
-                             f'|2 d L| = {self.rotation_measure[worst]:.3f} >= 1 (valid=False)')
+            text += (f'; segment {worst} breaks the small-rotation rule '
+                     f'|2 d L| = {self.rotation_measure[worst]:.3f} >= 1 (valid=False)')
+        return text
+
+    @functools.cached_property
+    def coefficients(self):
+        """(b1 [-], b3 [1/m^2], c1 [-], d [1/m]) of each segment, shape (N, 4)."""
+        return from_scaled(self.q, self.solver.segments.lengths)
+
+    @functools.cached_property
+    def _chain(self):
+        return node_positions(self.q, self.solver.segments.lengths)
+
+    @property
+    def nodes(self):
+        """Segment nodes O_1..O_{N+1}, shape (N + 1, 2) [m]."""
+        return self._chain[0]
+
+    @property
+    def theta(self):
+        """Node angles theta_i, shape (N,) [rad]."""
+        return self._chain[1]
+
+    @property
+    def beta(self):
+        """End rotations beta_i, shape (N,) [rad]."""
+        return self._chain[2]
+
+    @property
+    def tip(self):
+        """Global (X, Z) of the tip, shape (2,) [m]."""
+        return self._chain[0][-1]
 
     @functools.cached_property
     def _samples(self):

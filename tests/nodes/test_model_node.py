@@ -365,15 +365,17 @@ def test_parameter_changes_rebuild_the_solvers(model):
     stamp = probe.send_pressure('finger_0', ATM + 120e3)
     probe.shape_stamped('finger_0', stamp)
     try:
-        count = len(probe.shapes['finger_0'])
+        # Every finger is re-solved after a rebuild: wait for all of them, so that a late
+        # shape of one change cannot pass for the next one.
+        counts = {f: len(probe.shapes[f]) for f in FINGERS}
         (result,) = node.set_parameters([Parameter('n_segments', value=4)])
         assert result.successful
-        assert probe.wait(lambda: len(probe.shapes['finger_0']) > count)
+        assert probe.wait(lambda: all(len(probe.shapes[f]) > counts[f] for f in FINGERS))
         assert_shape_is(probe.shapes['finger_0'][-1], direct(120e3, n_segments=4), 'finger_0')
-        count = len(probe.shapes['finger_2'])
+        counts = {f: len(probe.shapes[f]) for f in FINGERS}
         (result,) = node.set_parameters([Parameter('pressure_model', value='isobaric')])
         assert result.successful
-        assert probe.wait(lambda: len(probe.shapes['finger_2']) > count)
+        assert probe.wait(lambda: all(len(probe.shapes[f]) > counts[f] for f in FINGERS))
         gauge = node.core.fingers[2].gauge
         assert_shape_is(probe.shapes['finger_2'][-1],
                         direct(gauge, n_segments=4, pressure_model='isobaric'), 'finger_2')
