@@ -16,9 +16,9 @@ stations, tol 1e-10).
 
 import argparse
 import csv
-import os
 import json
 import math
+import os
 import pathlib
 import platform
 import sys
@@ -109,7 +109,7 @@ def kx_protocol(repeats):
 
 
 def pareto(points):
-    """Indices of the Pareto-optimal (time, error) points, both minimised."""
+    """Return the indices of the Pareto-optimal (time, error) points, both minimised."""
     order = sorted(range(len(points)), key=lambda i: (points[i][0], points[i][1]))
     front, best = [], math.inf
     for i in order:

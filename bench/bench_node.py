@@ -24,17 +24,16 @@ import sys
 import threading
 import time
 
+from nav_msgs.msg import Path
 import numpy as np
+import rclpy
+from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import FluidPressure
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 from timing import machine, median_time  # noqa: E402
-
-from nav_msgs.msg import Path  # noqa: E402
-import rclpy  # noqa: E402
-from rclpy.context import Context  # noqa: E402
-from rclpy.executors import SingleThreadedExecutor  # noqa: E402
-from rclpy.qos import QoSProfile, ReliabilityPolicy  # noqa: E402
-from sensor_msgs.msg import FluidPressure  # noqa: E402
 
 from fpc_gripper.io.config import load_gripper_config  # noqa: E402
 from fpc_gripper.io.messages import serialized_shape  # noqa: E402

@@ -22,7 +22,7 @@ TARGETS = {'cold_s': 1e-3, 'warm_s': 0.3e-3, 'kx_s': 3e-3, 'speedup': 300.0}
 
 def naive_solve(solver, pressure, scaled):
     """
-    scipy BFGS with finite-difference gradients on the same energy, from flat.
+    Minimise the same energy with scipy BFGS and finite-difference gradients, from flat.
 
     scaled=False works in the SI coefficients (b1, b3, c1, d) that the API exposes,
     with scipy's default gtol: what a user would write first. scaled=True hands BFGS

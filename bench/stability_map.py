@@ -106,7 +106,7 @@ def plain_newton(solver, pressure, loads):
 
 
 def damped_newton(solver, pressure, loads):
-    """The solver's damped Newton from the flat state, without continuation."""
+    """Run the solver's damped Newton from the flat state, without continuation."""
     q, status, its, *_ = solver._newton(np.zeros((solver.n_segments, 4)), pressure, loads)
     return q, status in (SolverStatus.SUCCESS, SolverStatus.UNSTABLE), its
 

@@ -218,7 +218,7 @@ class _LadderSolver:
         start = unloaded.tip[k]
         iterations = unloaded.iterations
         # Probe the initial stiffness with a small force, then secant steps.
-        f_a, d_a, res_a = 0.0, 0.0, unloaded
+        f_a, d_a = 0.0, 0.0
         f_b = 1e-3
         res_b = self.solve(pressure, tuple(f_b * direction), initial=unloaded)
         iterations += res_b.iterations
@@ -238,7 +238,7 @@ class _LadderSolver:
             f_new = f_b + max(-1.0, min(1.0, f_new - f_b))
             res_new = self.solve(pressure, tuple(f_new * direction), initial=res_b)
             iterations += res_new.iterations
-            f_a, d_a, res_a = f_b, d_b, res_b
+            f_a, d_a = f_b, d_b
             f_b, d_b, res_b = f_new, res_new.tip[k] - start, res_new
         return RigidityResult(axis, delta, f_b, math.nan, False,
                               'displacement control did not converge', unloaded, res_b,

@@ -226,7 +226,7 @@ def choose_model(scene, tolerance, error_model=None):
 
 def _scene_bin(model, scene, turning):
     """
-    The error-model cell of a scene: (turning bin, load bin), or the reasons it is outside.
+    Return the error-model cell of a scene: (turning bin, load bin), or why it is outside.
 
     Two scenes in the same cell get the same choice for any tolerance.
     """
@@ -250,7 +250,7 @@ def _scene_bin(model, scene, turning):
 
 
 def _choose(model, cell, tolerance):
-    """The cheapest model whose measured bound in `cell` meets `tolerance`."""
+    """Return the cheapest model whose measured bound in `cell` meets `tolerance`."""
     rod_cost = next((m['time'] for m in model['models'] if m['rung'] == 'rod'), float('nan'))
     if isinstance(cell[0], str):
         return ModelChoice('rod', 0, 0.0, 'outside the measured envelope ('
@@ -474,7 +474,7 @@ class AdaptiveSolver:
         return PchipInterpolator(grid, values)
 
     def _turning(self, scene):
-        """Turning |kappa L| of the arc rung for a scene [rad]."""
+        """Return the arc rung's turning |kappa L| for a scene [rad]."""
         if scene.load == 0.0 and scene.pressure <= self._turning_table.x[-1]:
             return abs(float(self._turning_table(scene.pressure)))
         key = (round(scene.pressure / 1e3), round(scene.tip_force[0] / 5e-3),
@@ -488,7 +488,7 @@ class AdaptiveSolver:
         return self._loaded_turning[key]
 
     def solver_for(self, rung, n_segments):
-        """The (cached) solver of a rung and N."""
+        """Return the (cached) solver of a rung and N."""
         key = (rung, int(n_segments))
         if key not in self._solvers:
             self._solvers[key] = make_solver(rung, n_segments, self.design, self.pressure_model)

@@ -13,10 +13,10 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
+from .parameters import float_range
 from ..io.mcap_writer import (normalize_type_name, Rosbag2McapWriter, SchemaNotFoundError,
                               type_description_hash)
 from ..io.messages import gripper_topics
-from .parameters import float_range
 
 __all__ = ['McapRecorder', 'main']
 

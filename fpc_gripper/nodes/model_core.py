@@ -510,7 +510,7 @@ class ModelCore:
 
     def ready(self, now_ns):
         """
-        Indices of the fingers with pending input and solve budget left.
+        Return the indices of the fingers with pending input and solve budget left.
 
         Parameters
         ----------

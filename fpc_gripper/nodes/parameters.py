@@ -6,12 +6,12 @@ __all__ = ['float_range', 'int_range', 'declare_table']
 
 
 def float_range(low, high):
-    """A ParameterDescriptor floating_point_range of [low, high]."""
+    """Return a ParameterDescriptor floating_point_range of [low, high]."""
     return [FloatingPointRange(from_value=float(low), to_value=float(high), step=0.0)]
 
 
 def int_range(low, high):
-    """A ParameterDescriptor integer_range of [low, high], step 1."""
+    """Return a ParameterDescriptor integer_range of [low, high], step 1."""
     return [IntegerRange(from_value=int(low), to_value=int(high), step=1)]
 
 

@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 from scipy.optimize._numdiff import approx_derivative
+from section_reference import quad_minimiser, quad_section
 
 from fpc_gripper.model import (ActuatorDesign, ArcSolver, CCMSolver, PRESSURE_MODELS,
                                RodSolver, SolverStatus)
@@ -10,7 +11,6 @@ from fpc_gripper.model.kinematics import consistent_from_strain, consistent_stra
 from fpc_gripper.model.section_law import (build_section_law, rib_coverage,
                                            section_minimiser, station_layout)
 from fpc_gripper.model.selection import aligned_edges
-from section_reference import quad_minimiser, quad_section
 
 
 def uniform_design(prestrain):

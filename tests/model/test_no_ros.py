@@ -6,7 +6,7 @@ import textwrap
 
 
 def test_model_imports_without_ros():
-    code = textwrap.dedent('''
+    code = textwrap.dedent("""
         import sys
         class Block:
             def find_spec(self, name, path=None, target=None):
@@ -20,7 +20,7 @@ def test_model_imports_without_ros():
         assert r.success
         assert not any(k.split('.')[0] == 'rclpy' for k in sys.modules)
         print('ok')
-    ''')
+    """)
     out = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
                          timeout=120)
     assert out.returncode == 0, out.stderr

@@ -2,10 +2,9 @@
 
 import numpy as np
 import pytest
+from section_reference import quad_minimiser
 
 from fpc_gripper.model import ActuatorDesign, CCMSolver, PRESSURE_MODELS
-
-from section_reference import quad_minimiser
 
 
 @pytest.mark.parametrize('prestrain, pressure, model', [
