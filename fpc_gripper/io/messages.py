@@ -112,6 +112,18 @@ def time_to_ns(stamp):
     return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
 
 
+def _points_and_half_angles(result):
+    """Return a result's (M, 2) points [m] and half the negated tangent angles [rad]."""
+    points = np.asarray(result.points, dtype=float)
+    angles = getattr(result, 'tangent', None)
+    angles = tangent_angles(points) if angles is None else np.asarray(angles, dtype=float)
+    if angles.shape != (points.shape[0],):
+        raise ValueError(f'`result.tangent` must have shape ({points.shape[0]},) [rad], '
+                         f'got {angles.shape}')
+    # A tangent angle t from +X towards +Z is a rotation of -t about +Y.
+    return points, -0.5 * angles
+
+
 def tangent_angles(points):
     """
     Estimate tangent angles of a sampled planar curve by second-order differences.
@@ -141,13 +153,7 @@ def tangent_angles(points):
 
 def _shape_arrays(result):
     """Return the (M, 2) points and the quaternion (y, w) halves of a result's shape."""
-    points = np.asarray(result.points, dtype=float)
-    angles = getattr(result, 'tangent', None)
-    angles = tangent_angles(points) if angles is None else np.asarray(angles, dtype=float)
-    if angles.shape != (points.shape[0],):
-        raise ValueError(f'`result.tangent` must have shape ({points.shape[0]},) [rad], '
-                         f'got {angles.shape}')
-    half = -0.5 * angles
+    points, half = _points_and_half_angles(result)
     return points, np.sin(half), np.cos(half)
 
 
@@ -351,13 +357,7 @@ def serialized_shape(result, frame_id, stamp_ns):
         from the start of the payload, after the 4-byte encapsulation header.
 
     """
-    points = np.asarray(result.points, dtype=float)
-    angles = getattr(result, 'tangent', None)
-    angles = tangent_angles(points) if angles is None else np.asarray(angles, dtype=float)
-    if angles.shape != (points.shape[0],):
-        raise ValueError(f'`result.tangent` must have shape ({points.shape[0]},) [rad], '
-                         f'got {angles.shape}')
-    half = -0.5 * angles
+    points, half = _points_and_half_angles(result)
     count = points.shape[0]
     # Pose: position (x, y, z), orientation (x, y, z, w), as in shape_message.
     values = np.zeros((count, 7))
