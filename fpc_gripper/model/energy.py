@@ -4,7 +4,7 @@ import functools
 
 import numpy as np
 
-from .kinematics import end_rotation, rotation_sum
+from .kinematics import node_positions
 
 __all__ = ['segment_energy', 'segment_derivatives', 'load_energy', 'load_derivatives']
 
@@ -133,16 +133,8 @@ def load_energy(q, lengths, loads):
     """
     if not loads:
         return 0.0
-    beta = end_rotation(q)
-    theta = rotation_sum(beta)
-    u = lengths * (1.0 + q[:, 0] + q[:, 1])
-    w = lengths * q[:, 3]
-    c, s = np.cos(theta), np.sin(theta)
-    vx, vz = c * u - s * w, s * u + c * w
-    total = 0.0
-    for node, force in loads:
-        total -= force[0] * vx[:node].sum() + force[1] * vz[:node].sum()
-    return total
+    nodes = node_positions(q, lengths)[0]
+    return -sum(float(force @ nodes[node]) for node, force in loads)
 
 
 # beta = atan2(b, a) with a = 1 + q0 + 3 q1 and b = 2 q3: the constant da/dq, db/dq.
@@ -191,12 +183,8 @@ def load_derivatives(q, lengths, loads):
     energy = 0.0
     if not loads:
         return energy, grad, hess.reshape(4 * n, 4 * n)
-    beta = end_rotation(q)
-    theta = rotation_sum(beta)
+    nodes, theta, _ = node_positions(q, lengths)
     c, s = np.cos(theta), np.sin(theta)
-    u = lengths * (1.0 + q[:, 0] + q[:, 1])
-    w = lengths * q[:, 3]
-    v = np.stack([c * u - s * w, s * u + c * w], axis=1)
     dbeta, d2beta = _beta_derivatives(q)
     # R(theta_j) dp_j/dq_j: p_j depends on (q0, q1) along X_j and q3 along Z_j.
     rp = np.zeros((n, 2, 4))
@@ -209,11 +197,10 @@ def load_derivatives(q, lengths, loads):
         if fx == 0.0 and fz == 0.0:
             continue
         m = node
-        vm = v[:m]
-        tip = vm.sum(axis=0)
+        tip = nodes[m]
         energy -= fx * tip[0] + fz * tip[1]
         # r_j = O_n - O_{j+1}: the arm from node j+1 to the loaded node.
-        r = tip - np.cumsum(vm, axis=0)
+        r = tip - nodes[1:m + 1]
         moment = -fx * r[:, 1] + fz * r[:, 0]          # F^T S r_j
         f_dot_r = fx * r[:, 0] + fz * r[:, 1]
         f_rp = fx * rp[:m, 0] + fz * rp[:m, 1]          # F^T R_j P_j, (m, 4)

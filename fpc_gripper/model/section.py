@@ -183,8 +183,8 @@ def build_segments(design, edges):
         (full, (-design.h3, design.h2), width, fl, 1.0),
     ]
     channel = (-design.h3b, design.h3a)
-    chan_x = _x_moments(np.zeros(n) - 0.0, np.minimum(design.channel_end, ends) - starts, lens)
-    chan_x[design.channel_end <= starts] = 0.0
+    # Segments past the channel end get an empty interval: _x_moments clips to [0, L_i].
+    chan_x = _x_moments(np.zeros(n), np.minimum(design.channel_end, ends) - starts, lens)
     gas = [(chan_x, design.Cy, 1.0)]
     if design.ribs:
         gas.append((chan_x, design.t, -1.0))

@@ -613,9 +613,8 @@ class CCMSolver:
             kkt = np.zeros((4 * n + 1, 4 * n + 1))
             kkt[:-1, :-1] = h
             kkt[:-1, -1] = kkt[-1, :-1] = g_dir.ravel()
-            rhs = -np.concatenate([residual, [gap]])
-            # The constraint row is -grad(e . tip) = g_dir, so the gap enters with a minus.
-            rhs[-1] = gap
+            # Linearised constraint: g_dir = -grad(e . tip), so g_dir . dq = gap.
+            rhs = np.concatenate([-residual, [gap]])
             try:
                 sol = np.linalg.solve(kkt, rhs)
             except np.linalg.LinAlgError:
