@@ -43,6 +43,8 @@ N_ALIGNED = (22, 32, 44, 64)
 TURNING_BINS = (0.5, 1.0, 1.5, 2.0, 2.5, 3.0, 3.5, 4.0, 5.0, 6.5)   # upper edges [rad]
 LOAD_BINS = (0.0, 0.5, 1.0)                                        # upper edges [N]
 SAFETY = 1.5
+COST_NOTE = ('unknowns x median Newton iterations of the cold solves of the ladder scenes; '
+             "'time' is informative only and never used to choose")
 #: Upper bound on the rod's own tip error, checked by p- and h-refinement [m].
 ROD_ERROR = 1e-10
 
@@ -77,6 +79,56 @@ def models():
                                              reconstruction='consistent')))
     out.append(('rod', 0, lambda d: RodSolver(d)))
     return out
+
+
+def unknowns(result):
+    """Number of unknowns of the discretisation behind a result."""
+    if hasattr(result, 'q'):
+        return int(result.q.size)
+    state = result.state
+    if isinstance(state, tuple):
+        return int(sum(np.size(part) for part in state))
+    return int(np.size(state))
+
+
+def static_cost(rows):
+    """
+    Static cost of every model: unknowns x median Newton iterations of its cold solves.
+
+    Both factors are properties of the discretisation and its solver, the same on every
+    machine and in every run, so the model choice never depends on a measured time.
+    """
+    out = {}
+    for r in rows:
+        out.setdefault((r['rung'], r['n']), []).append((r['unknowns'], r['iterations']))
+    return {key: {'unknowns': int(v[0][0]),
+                  'iterations': float(np.median([i for _, i in v])),
+                  'cost': float(v[0][0] * np.median([i for _, i in v]))}
+            for key, v in out.items()}
+
+
+def cost_rows(quick=False):
+    """Cold solves of every model on every scene: unknowns and iterations, no timing."""
+    rows = []
+    designs = {e: ActuatorDesign.paper(e) for e in PRESTRAINS}
+    for kind, eps0, p, f in scenes(quick):
+        for rung, n, factory in models():
+            res = factory(designs[eps0]).solve(p, f)
+            rows.append({'rung': rung, 'n': n, 'unknowns': unknowns(res),
+                         'iterations': res.iterations})
+    return rows
+
+
+def patch_costs(path=None):
+    """Write the static costs into an existing error model (no re-measurement of errors)."""
+    path = ROOT / 'fpc_gripper' / 'data' / 'error_model.json' if path is None else path
+    model = json.loads(path.read_text())
+    costs = static_cost(cost_rows())
+    for entry in model['models']:
+        entry.update(costs[(entry['rung'], entry['n_segments'])])
+    model['cost'] = COST_NOTE
+    path.write_text(json.dumps(model, indent=1))
+    return model
 
 
 def timed(fn, repeats):
@@ -146,7 +198,8 @@ def error_model(rows, summary):
                    and math.isfinite(cum[i, j]) else None) for j in range(nt)]
                  for i in range(nl)]
         out.append({'rung': rung, 'n_segments': n, 'time': entry['time_median'],
-                    'bound': bound, 'invalid': cbad.tolist()})
+                    'unknowns': entry['unknowns'], 'iterations': entry['iterations'],
+                    'cost': entry['cost'], 'bound': bound, 'invalid': cbad.tolist()})
     return out
 
 
@@ -154,7 +207,12 @@ def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[1])
     parser.add_argument('--quick', action='store_true', help='fewer scenes and repeats')
     parser.add_argument('--repeats', type=int, default=3)
+    parser.add_argument('--costs-only', action='store_true',
+                        help='only (re)write the static costs into the shipped error model')
     args = parser.parse_args(argv)
+    if args.costs_only:
+        patch_costs()
+        return
     repeats = 1 if args.quick else args.repeats
     start = time.perf_counter()
     rows = []
@@ -171,6 +229,7 @@ def main(argv=None):
                 'scene': sid, 'kind': kind, 'prestrain': eps0, 'pressure': p,
                 'f0': f[0], 'p0': f[1], 'load': math.hypot(*f), 'rung': rung, 'n': n,
                 'time': t, 'success': bool(res.success), 'valid': bool(res.valid),
+                'unknowns': unknowns(res), 'iterations': res.iterations,
                 'tip_error': float(np.linalg.norm(res.tip - ref.tip)) if ok else math.nan,
                 'curvature_error': abs(res.curvature - ref.curvature) if ok else math.nan,
                 'rod_turning': abs(float(ref.tangent[-1])), 'arc_turning': arc_turning,
@@ -189,6 +248,8 @@ def main(argv=None):
             'failed': int(sum(not r['success'] for r in mine)),
             'invalid': int(sum(r['success'] and not r['valid'] for r in mine)),
         }
+    for key, cost in static_cost(rows).items():
+        summary[key].update(cost)
     kx_rows = kx_protocol(repeats)
     for (rung, n), entry in summary.items():
         rel = [r['kx_rel_error'] for r in kx_rows if r['rung'] == rung and r['n'] == n]
@@ -236,9 +297,11 @@ def main(argv=None):
         'turning_bins': list(TURNING_BINS), 'load_bins': list(LOAD_BINS), 'safety': SAFETY,
         'ranges': {'prestrain': [min(PRESTRAINS), max(PRESTRAINS)], 'pressure': [0.0, 400e3],
                    'load': [0.0, max(LOAD_BINS)]},
+        'cost': COST_NOTE,
         'models': error_model(rows, summary) + [{
             'rung': 'rod', 'n_segments': 0, 'time': rod_time, 'bound': None,
-            'invalid': None}],
+            'invalid': None,
+            **{k: summary[('rod', 0)][k] for k in ('unknowns', 'iterations', 'cost')}}],
     }
     data = ROOT / 'fpc_gripper' / 'data'
     data.mkdir(exist_ok=True)

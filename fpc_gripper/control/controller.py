@@ -1,6 +1,7 @@
 """Gripper control law: model-inverse feedforward plus PI feedback, slew and range limits."""
 
 import collections
+import copy
 from dataclasses import dataclass, field, fields
 import enum
 import math
@@ -459,6 +460,9 @@ class GripperControlLaw:
         Returns
         -------
         ControlOutput
+            If anything inside the step raises (a model that does not converge, a root
+            find that fails), the step is undone and the output holds the last good
+            commands at level ERROR with the error in its message.
 
         """
         now = _real('now', now, '[s]')
@@ -466,6 +470,31 @@ class GripperControlLaw:
         if len(measurements) != len(self.models):
             raise ValueError(f'`measurements` must hold one entry per finger '
                              f'({len(self.models)}), got {len(measurements)}')
+        saved = {k: v for k, v in self.__dict__.items() if k != '_fingers'}
+        fingers = copy.deepcopy(self._fingers)
+        try:
+            return self._step(now, measurements)
+        except Exception as exc:  # noqa: B902 -- whatever the model raised, the loop goes on
+            # Undo the half-done step, so the next one starts from the last good state.
+            self.__dict__.update(saved)
+            self._fingers = fingers
+            return self._hold(now, measurements, exc)
+
+    def _hold(self, now, measurements, exc):
+        """Output after a step raised: the last good commands held, level ERROR."""
+        commands = tuple(f.command for f in self._fingers)
+        held = None if any(c is None for c in commands) else commands
+        message = (f'model error, holding the last commands: {type(exc).__name__}: {exc}'
+                   [:500])
+        return ControlOutput(
+            time=now, mode=self.mode, status=self.status, level=Level.ERROR, message=message,
+            commands=held, aperture=math.nan, aperture_target=self._aperture_target,
+            force_target=self._force_target, fingers=tuple(
+                FingerOutput(math.nan if c is None else c, math.nan, math.nan, f.integral,
+                             math.nan, f.phase, False, m.tip_force[1])
+                for c, f, m in zip(commands, self._fingers, measurements)))
+
+    def _step(self, now, measurements):
         dt = 0.0 if self._last_time is None else min(max(now - self._last_time, 0.0), _MAX_DT)
         self._last_time = now
         estimates = [self._estimate(i, m) for i, m in enumerate(measurements)]
@@ -507,7 +536,8 @@ class GripperControlLaw:
         pressure = min(max(measurement.pressure, 0.0), self.models[index].max_pressure)
         try:
             return self.models[index].estimate(pressure, tuple(measurement.tip_force))
-        except RuntimeError:
+        except (RuntimeError, ValueError, ArithmeticError):
+            # No converged model state here: the finger runs on feedforward alone.
             return math.nan, None
 
     def _lost_feedback(self, now, measurements):

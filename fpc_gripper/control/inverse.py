@@ -9,7 +9,8 @@ import numpy as np
 from scipy.interpolate import PchipInterpolator
 from scipy.optimize import brentq
 
-from fpc_gripper.model import CCMSolver
+from fpc_gripper.model.pipeline import finger_model
+from fpc_gripper.model.pipeline import ModelSettings
 from fpc_gripper.model.validation import real_number
 
 __all__ = ['InverseModel', 'InverseResult', 'InverseStatus', 'Linearisation']
@@ -22,6 +23,8 @@ DEFAULT_XTOL = 1.0e-3
 _H_PRESSURE = 200.0
 _H_FORCE = 2.0e-3
 _CACHE_SIZE = 256
+#: Largest gap between the target and the achieved radius still called exact [m].
+_REACHED = 1.0e-9
 
 
 class InverseStatus(enum.IntEnum):
@@ -39,7 +42,7 @@ _MESSAGES = {
                                '({low:.5f} m): returning 0 Pa',
     InverseStatus.ABOVE_RANGE: 'target radius {target:.5f} m is above the radius at max_pressure '
                                '({high:.5f} m): returning max_pressure',
-    InverseStatus.SOLVER_FAILED: 'the CCM solver did not converge at {pressure:.1f} Pa: {why}',
+    InverseStatus.SOLVER_FAILED: 'the finger model did not converge at {pressure:.1f} Pa: {why}',
 }
 
 
@@ -129,15 +132,24 @@ def _force(tip_force):
             real_number('tip_force[1]', tip_force[1], '[N]'))
 
 
+def _snap(value, step):
+    """Round to a multiple of `step`, keeping non-zero values off 0 (0.0, never -0.0)."""
+    if value == 0.0:
+        return 0.0
+    return math.copysign(max(1, round(abs(value) / step)) * step, value)
+
+
 class InverseModel:
     """
-    Inverse of the CCM finger model: pressure for a tip radius, a grasp force, estimates.
+    Inverse of the finger model: pressure for a tip radius, a grasp force, estimates.
 
-    At construction the unloaded finger is solved on a pressure grid over
-    [0, max_pressure]; the tip radius rho = palm_radius + Z_tip must be strictly
-    increasing on it (the region where the gripper is controlled), otherwise
-    ValueError is raised. Interpolating that monotone map (PCHIP) gives a first
-    guess that one bracketed Brent root find on the exact solver then polishes.
+    The finger is the one of the finger pipeline (`finger_model(design, settings)`),
+    the model `model_node` publishes with the same settings. At construction the
+    unloaded finger is solved on a pressure grid over [0, max_pressure]; the tip
+    radius rho = palm_radius + Z_tip must be strictly increasing on it (the region
+    where the gripper is controlled), otherwise ValueError is raised. Interpolating
+    that monotone map (PCHIP) gives a first guess that one bracketed Brent root find
+    on the exact model then polishes.
 
     Parameters
     ----------
@@ -147,9 +159,8 @@ class InverseModel:
         Palm centre to the clamp edge [m].
     max_pressure : float
         Largest gauge pressure the inverse may return [Pa].
-    n_segments : int
-        CCM segments.
-    pressure_model : {'adiabatic', 'isobaric'}
+    settings : ModelSettings
+        How the finger is modelled (default: the node's defaults).
     grid_step : float
         Spacing of the map [Pa].
     xtol : float
@@ -157,17 +168,17 @@ class InverseModel:
 
     Notes
     -----
-    Every solve is warm-started from the last converged state when it is close
-    (same load, within two grid steps), else from the nearest grid state; the
-    solver has no hidden state, so the answer does not depend on the history
-    beyond its convergence tolerance. Results of `pressure_for_rho` are cached
-    by (target, load), so callers should round the load to the resolution
-    they need.
+    Every answer is a function of the call's arguments alone. Each solve is
+    warm-started from the grid state nearest in pressure, and a warm start changes
+    only the iteration count (the solver converges to 1e-9 in its scaled unknowns,
+    some 1e-15 m in radius, far below what `xtol` resolves); so the residual of a
+    root find is a fixed function of pressure and a bracket end evaluated twice has
+    the same sign. Caches are keyed by the whole input.
 
     """
 
-    def __init__(self, design, palm_radius, max_pressure, n_segments=8,
-                 pressure_model='adiabatic', grid_step=DEFAULT_GRID_STEP, xtol=DEFAULT_XTOL):
+    def __init__(self, design, palm_radius, max_pressure, settings=ModelSettings(),
+                 grid_step=DEFAULT_GRID_STEP, xtol=DEFAULT_XTOL):
         self.palm_radius = real_number('palm_radius', palm_radius, '[m]')
         self.max_pressure = real_number('max_pressure', max_pressure, '[Pa]')
         grid_step = real_number('grid_step', grid_step, '[Pa]')
@@ -180,7 +191,8 @@ class InverseModel:
             raise ValueError(f'`grid_step` must be > 0 [Pa], got {grid_step}')
         if self.xtol <= 0.0:
             raise ValueError(f'`xtol` must be > 0 [Pa], got {self.xtol}')
-        self.solver = CCMSolver(design, n_segments=n_segments, pressure_model=pressure_model)
+        self.settings = settings
+        self.solver = finger_model(design, settings)
         self.design = design
         self.nfev = 0
         n = max(4, int(math.ceil(self.max_pressure / grid_step)) + 1)
@@ -203,9 +215,8 @@ class InverseModel:
         self._forward = PchipInterpolator(self.grid_pressure, self.grid_rho)
         self._slope = self._forward.derivative()
         self._backward = PchipInterpolator(self.grid_rho, self.grid_pressure)
-        self._last = None
         self._cache = OrderedDict()
-        self._linearisations = []
+        self._linearisations = OrderedDict()
 
     # -- forward model ------------------------------------------------------------------
 
@@ -214,18 +225,14 @@ class InverseModel:
         """Unloaded tip radii at 0 Pa and max_pressure [m]."""
         return float(self.grid_rho[0]), float(self.grid_rho[-1])
 
-    def _initial(self, pressure, tip_force):
-        last = self._last
-        step = self.grid_pressure[1] - self.grid_pressure[0]
-        if last is not None and last.tip_force == tip_force \
-                and abs(last.pressure - pressure) <= 2.0 * step:
-            return last
+    def _initial(self, pressure):
+        """The grid state nearest in pressure: a warm start that depends on `pressure` only."""
         index = int(np.argmin(np.abs(self.grid_pressure - pressure)))
         return self._grid_results[index]
 
     def solve(self, pressure, tip_force=(0.0, 0.0)):
         """
-        Equilibrium of the finger at a gauge pressure and tip load, warm-started.
+        Equilibrium of the finger at a gauge pressure and tip load.
 
         Parameters
         ----------
@@ -236,16 +243,15 @@ class InverseModel:
 
         Returns
         -------
-        CCMResult
+        CCMResult or LadderResult
+            The finger pipeline's result (with `model_choice` for an adaptive model).
 
         """
         pressure = real_number('pressure', pressure, '[Pa]')
         tip_force = _force(tip_force)
         result = self.solver.solve(pressure, tip_force=tip_force,
-                                   initial=self._initial(pressure, tip_force))
+                                   initial=self._initial(pressure))
         self.nfev += 1
-        if result.success:
-            self._last = result
         return result
 
     def rho(self, pressure, tip_force=(0.0, 0.0)):
@@ -281,6 +287,10 @@ class InverseModel:
         """
         Linearisation of rho(P, f0, p0) by forward differences of exact solves.
 
+        The differences are taken on the discretisation that models the reference
+        state, so that a change of model between neighbouring scenes (which the
+        adaptive model may make) never enters a slope.
+
         Parameters
         ----------
         pressure : float
@@ -293,29 +303,48 @@ class InverseModel:
         Linearisation
             drho_df0 is computed only when f0 != 0 (else 0: no X load is modelled).
 
+        Raises
+        ------
+        RuntimeError
+            If a solve does not converge.
+
         """
         pressure = real_number('pressure', pressure, '[Pa]')
         f0, p0 = _force(tip_force)
-        rho = self.rho(pressure, (f0, p0))
+        reference = self.solve(pressure, (f0, p0))
+        if not reference.success:
+            raise RuntimeError(f'finger model failed at {pressure} Pa, tip force ({f0}, {p0}) '
+                               f'N: {reference.message}')
+        fixed = reference.solver
+
+        def rho(p, force):
+            result = fixed.solve(p, force, initial=reference)
+            self.nfev += 1
+            if not result.success:
+                raise RuntimeError(f'finger model failed at {p} Pa, tip force {force} N: '
+                                   f'{result.message}')
+            return self.palm_radius + float(result.tip[1])
+
+        rho0 = self.palm_radius + float(reference.tip[1])
         h = _H_PRESSURE if pressure + _H_PRESSURE <= self.max_pressure else -_H_PRESSURE
-        drho_dp = (self.rho(pressure + h, (f0, p0)) - rho) / h
-        drho_dp0 = (self.rho(pressure, (f0, p0 + _H_FORCE)) - rho) / _H_FORCE
+        drho_dp = (rho(pressure + h, (f0, p0)) - rho0) / h
+        drho_dp0 = (rho(pressure, (f0, p0 + _H_FORCE)) - rho0) / _H_FORCE
         drho_df0 = 0.0
         if f0 != 0.0:
-            drho_df0 = (self.rho(pressure, (f0 + _H_FORCE, p0)) - rho) / _H_FORCE
-        self.rho(pressure, (f0, p0))  # leave the warm start at the reference
-        return Linearisation(pressure, (f0, p0), rho, drho_dp, drho_df0, drho_dp0)
+            drho_df0 = (rho(pressure, (f0 + _H_FORCE, p0)) - rho0) / _H_FORCE
+        return Linearisation(pressure, (f0, p0), rho0, drho_dp, drho_df0, drho_dp0)
 
     def estimate(self, pressure, tip_force=(0.0, 0.0), pressure_window=4.0e3,
                  force_window=0.03):
         """
-        Cheap tip radius for a measured state: a linearisation reused in a trust region.
+        Cheap tip radius for a measured state: a linearisation about the nearest cell centre.
 
-        A linearisation is reused while |P - P_ref| <= `pressure_window` and both
-        load components are within `force_window` of the reference; otherwise a new
-        one is built (3 or 4 exact solves). The error is second order, below 2e-5 m
-        for the default windows on the paper's finger. Up to four references are kept
-        (one per finger when fingers share a model).
+        The reference is the measured state rounded to a grid of `pressure_window` [Pa]
+        and `force_window` [N] (clipped to [0, max_pressure]; a non-zero load component
+        never rounds to 0, since an unloaded finger may be modelled more coarsely), so
+        the answer is a function of the arguments alone; linearisations are cached per reference. The
+        error is second order, below 2e-5 m for the default windows on the paper's
+        finger.
 
         Returns
         -------
@@ -324,19 +353,24 @@ class InverseModel:
         linearisation : Linearisation
             The reference used.
 
+        Raises
+        ------
+        RuntimeError
+            If a solve at the reference does not converge.
+
         """
+        pressure = real_number('pressure', pressure, '[Pa]')
         f0, p0 = _force(tip_force)
-        for i, lin in enumerate(self._linearisations):
-            if abs(pressure - lin.pressure) <= pressure_window \
-                    and abs(f0 - lin.tip_force[0]) <= force_window \
-                    and abs(p0 - lin.tip_force[1]) <= force_window:
-                if i:
-                    self._linearisations.insert(0, self._linearisations.pop(i))
-                return lin(pressure, (f0, p0)), lin
-        lin = self.linearise(pressure, (f0, p0))
-        self._linearisations.insert(0, lin)
-        del self._linearisations[4:]
-        return lin.rho, lin
+        reference = (min(max(round(pressure / pressure_window) * pressure_window, 0.0),
+                         self.max_pressure),
+                     _snap(f0, force_window), _snap(p0, force_window))
+        lin = self._linearisations.get(reference)
+        if lin is None:
+            lin = self.linearise(reference[0], reference[1:])
+            self._linearisations[reference] = lin
+            if len(self._linearisations) > _CACHE_SIZE:
+                self._linearisations.popitem(last=False)
+        return lin(pressure, (f0, p0)), lin
 
     # -- inverse ------------------------------------------------------------------------
 
@@ -419,18 +453,29 @@ class InverseModel:
                 root = brentq(f, lo, hi, xtol=self.xtol, rtol=4.0 * np.finfo(float).eps)
             achieved = target + f(root)
         except _SolveFailed as failure:
-            return InverseResult(
-                x=float(np.clip(guess, 0.0, p_max)), success=False,
-                status=InverseStatus.SOLVER_FAILED,
-                message=_MESSAGES[InverseStatus.SOLVER_FAILED].format(
-                    pressure=failure.pressure, why=failure.result.message),
-                nfev=self.nfev - start, target=target, rho=math.nan, tip_force=tip_force)
+            return self._failed(guess, start, target, tip_force, failure.pressure,
+                                failure.result.message)
+        except (ValueError, RuntimeError, ArithmeticError) as exc:
+            return self._failed(guess, start, target, tip_force, guess,
+                                f'root find raised {type(exc).__name__}: {exc}')
         return self._result(root, InverseStatus.SUCCESS, start, target, tip_force, achieved)
+
+    def _failed(self, guess, start, target, tip_force, pressure, why):
+        return InverseResult(
+            x=float(np.clip(guess, 0.0, self.max_pressure)), success=False,
+            status=InverseStatus.SOLVER_FAILED,
+            message=_MESSAGES[InverseStatus.SOLVER_FAILED].format(pressure=pressure, why=why),
+            nfev=self.nfev - start, target=target, rho=math.nan, tip_force=tip_force)
 
     def _result(self, pressure, status, start, target, tip_force, achieved):
         low, high = self.rho_range
         message = _MESSAGES[status].format(xtol=self.xtol, target=target, low=low, high=high,
                                            pressure=pressure, why='')
+        if status is InverseStatus.SUCCESS and abs(achieved - target) > _REACHED:
+            # An adaptive model may change discretisation right at the root: the radius
+            # then jumps there by at most the model tolerance.
+            message += (f'; the model changes discretisation there, so the radius is '
+                        f'{achieved - target:+.2e} m off the target')
         return InverseResult(x=float(pressure), success=status is InverseStatus.SUCCESS,
                              status=status, message=message, nfev=self.nfev - start,
                              target=target, rho=float(achieved), tip_force=tip_force)

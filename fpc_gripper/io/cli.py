@@ -15,8 +15,7 @@ import time
 from .mcap_reader import McapFile, McapInputError, recover, UnknownTopicError
 from .mcap_writer import atomic_output, Rosbag2McapWriter, SchemaNotFoundError
 from .messages import (curvature_message, DEFAULT_ATMOSPHERIC_PRESSURE, finger_topic,
-                       gauge_pressure, MODEL_OUTPUT_TYPES, rigidity_message, serialized_shape,
-                       time_to_ns, tip_force_from_wrench)
+                       MODEL_OUTPUT_TYPES, rigidity_message, serialized_shape, time_to_ns)
 
 __all__ = ['ReplayReport', 'build_parser', 'export_csv', 'file_info', 'main', 'replay_model']
 
@@ -196,6 +195,9 @@ class ReplayReport:
         Equilibria written.
     failures : int
         Solves that did not converge (nothing written for them).
+    rejected : int
+        Inputs the model node would reject (non-finite, over the limit, wrong frame,
+        stale): nothing is solved for them.
     clipped : int
         Inputs below atmospheric pressure, solved at 0 Pa gauge.
     rigidity_solves : int
@@ -210,6 +212,7 @@ class ReplayReport:
     inputs: int = 0
     solves: int = 0
     failures: int = 0
+    rejected: int = 0
     clipped: int = 0
     rigidity_solves: int = 0
     fingers: list = dataclasses.field(default_factory=list)
@@ -217,18 +220,15 @@ class ReplayReport:
 
 
 class _Finger:
-    """Replay state of one finger."""
+    """Replay state of one finger: its index in the model core and its topics."""
 
-    def __init__(self, prefix, name, solver, pressure_topic, force_topic):
+    def __init__(self, index, prefix, name, pressure_topic, force_topic):
+        self.index = index
         self.prefix = prefix
         self.name = name
-        self.solver = solver
         self.pressure_topic = pressure_topic
         self.force_topic = force_topic
-        self.pressure = None
-        self.force = (0.0, 0.0)
-        self.last = None
-        self.rigidity = {}
+        self.has_pressure = False
         self.last_rigidity = None
         self.last_rigidity_time = None
 
@@ -280,20 +280,23 @@ def _progress_printer(stream, every_s=1.0):
     return show
 
 
-def replay_model(in_path, out_path, *, config=None, n_segments=8, pressure_model='adiabatic',
-                 source='auto', rigidity=True, rigidity_period=0.0, copy_inputs=False,
-                 compression='zstd', progress=None):
+def replay_model(in_path, out_path, *, config=None, settings=None, source='auto',
+                 rigidity=True, rigidity_period=0.0, stale_after_s=None,
+                 copy_inputs=False, compression='zstd', progress=None):
     """
-    Run the CCM core over recorded pressure and tip-force messages; write its outputs.
+    Run the model node's finger pipeline over recorded inputs; write its outputs.
 
-    Every ``finger_<i>/pressure`` (or ``pressure_command``) message, and every
-    ``finger_<i>/tip_force`` message once a pressure is known, triggers one solve with
-    the latest pressure (absolute minus the configuration's atmospheric pressure, clipped
-    at 0) and tip force (f0 = force.x, p0 = force.z), warm-started from that finger's last
-    converged result. Each converged solve writes ``shape``, ``curvature`` and
-    ``rigidity`` under the input's namespace, with the input's log time and its header
-    stamp. K_x and K_z are solved cold once per distinct pressure (at most once per
-    `rigidity_period` of log time per finger when that is > 0).
+    The recorded ``finger_<i>/pressure`` (or ``pressure_command``) and
+    ``finger_<i>/tip_force`` messages go, in log-time order, through the same
+    :class:`~fpc_gripper.nodes.model_core.ModelCore` and finger model that
+    ``model_node`` runs with the same settings: the same checks (non-finite, below
+    vacuum, over the design or gripper limit, wrong frame, stale against the log time),
+    the same gauge conversion (the configuration's atmospheric pressure, clipped at 0),
+    the same warm starts and model choice. Every accepted input, once the finger has a
+    pressure, is solved (replay has no rate limit), and each converged solve writes
+    ``shape``, ``curvature`` and ``rigidity`` under the input's namespace, with the
+    input's log time and the stamp the node would give it. A recording of
+    ``model_node`` with default settings therefore replays to the shapes it published.
 
     Parameters
     ----------
@@ -301,10 +304,8 @@ def replay_model(in_path, out_path, *, config=None, n_segments=8, pressure_model
         Input recording and output file (written to a temporary file, then moved).
     config : str or os.PathLike, optional
         Gripper configuration (default: the package's default configuration).
-    n_segments : int
-        CCM segments.
-    pressure_model : {'adiabatic', 'isobaric'}
-        Pressure work model.
+    settings : ModelSettings, optional
+        Finger model settings (default: ``model_node``'s defaults).
     source : {'auto', 'pressure', 'pressure_command'}
         Which pressure topic to replay; ``auto`` prefers the measured ``pressure``.
     rigidity : bool
@@ -312,6 +313,9 @@ def replay_model(in_path, out_path, *, config=None, n_segments=8, pressure_model
     rigidity_period : float
         Reuse a finger's last rigidities for this long [s]; 0 solves for every new
         pressure.
+    stale_after_s : float, optional
+        Inputs whose header stamp is older than this against their log time are
+        rejected [s], as ``model_node``'s parameter (default: its default); 0 disables.
     copy_inputs : bool
         Also copy the replayed input messages into the output.
     compression : {'zstd', 'lz4', 'none'}
@@ -326,8 +330,11 @@ def replay_model(in_path, out_path, *, config=None, n_segments=8, pressure_model
     """
     from rclpy.serialization import serialize_message
 
-    from ..model import CCMSolver
+    from ..model.pipeline import finger_model, ModelSettings
+    from ..nodes.model_core import DEFAULT_STALE_AFTER_S, ModelCore
 
+    settings = ModelSettings() if settings is None else settings
+    stale_after_s = DEFAULT_STALE_AFTER_S if stale_after_s is None else stale_after_s
     if not (math.isfinite(rigidity_period) and rigidity_period >= 0.0):
         raise ValueError(f'`rigidity_period` must be >= 0 [s], got {rigidity_period}')
     gripper = _load_config(config)
@@ -341,18 +348,18 @@ def replay_model(in_path, out_path, *, config=None, n_segments=8, pressure_model
             raise UnknownTopicError(
                 f'{mcap_file.path}: finger(s) {", ".join(unknown)} not in the gripper '
                 f'configuration (which has {", ".join(sorted(designs))})')
-        solvers = {}
         by_topic = {}
         fingers = []
         for (prefix, name), (pressure_topic, force_topic) in chosen.items():
-            if name not in solvers:
-                solvers[name] = CCMSolver(designs[name], n_segments=n_segments,
-                                          pressure_model=pressure_model)
-            finger = _Finger(prefix, name, solvers[name], pressure_topic, force_topic)
+            finger = _Finger(len(fingers), prefix, name, pressure_topic, force_topic)
             fingers.append(finger)
             by_topic[pressure_topic] = finger
             if force_topic:
                 by_topic[force_topic] = finger
+        core = ModelCore([(f.name, designs[f.name]) for f in fingers],
+                         lambda design: finger_model(design, settings),
+                         max_pressure=gripper.max_pressure, atmospheric_pressure=atmospheric,
+                         stale_after_s=stale_after_s)
         inputs = sorted(by_topic)
         mcap_file.check_decodable(inputs)
         total = sum(mcap_file.topics[t].message_count for t in inputs)
@@ -376,7 +383,7 @@ def replay_model(in_path, out_path, *, config=None, n_segments=8, pressure_model
                     report.inputs += 1
                     if copy_inputs:
                         writer.write(msg.topic, msg.data, msg.log_time, msg.publish_time)
-                    _replay_one(by_topic[msg.topic], msg, atmospheric,
+                    _replay_one(core, by_topic[msg.topic], msg,
                                 float(rigidity_period) if rigidity else None, writer,
                                 serialize_message, report)
                     if progress is not None:
@@ -385,50 +392,51 @@ def replay_model(in_path, out_path, *, config=None, n_segments=8, pressure_model
                 writer.close()
         if progress is not None:
             progress(report.inputs, total, final=True)
+        report.clipped = sum(state.clamped for state in core.fingers)
     report.outputs = dict(sorted(report.outputs.items()))
     return report
 
 
-def _replay_one(finger, msg, atmospheric, rigidity_period, writer, serialize, report):
-    """Solve one input; `rigidity_period` is None (no rigidity) or a period [s]."""
-    stamp = time_to_ns(msg.ros_msg.header.stamp) or msg.log_time
+def _replay_one(core, finger, msg, rigidity_period, writer, serialize, report):
+    """Offer one input to the core and write what it answers; `rigidity_period` None: none."""
+    stamp = time_to_ns(msg.ros_msg.header.stamp)
     if msg.topic == finger.pressure_topic:
-        gauge = gauge_pressure(msg.ros_msg, atmospheric)
-        if gauge < 0.0:
-            report.clipped += 1
-            gauge = 0.0
-        finger.pressure = gauge
+        kind = finger.pressure_topic.rsplit('/', 1)[-1]
+        check = core.offer_pressure(finger.index, msg.ros_msg.fluid_pressure, stamp,
+                                    msg.log_time, source=kind)
+        finger.has_pressure |= check.accepted
     else:
-        finger.force = tip_force_from_wrench(msg.ros_msg)
-    if finger.pressure is None:
+        force = msg.ros_msg.wrench.force
+        check = core.offer_tip_force(finger.index, force.x, force.z,
+                                     msg.ros_msg.header.frame_id, stamp, msg.log_time)
+    if not check.accepted:
+        report.rejected += 1
         return
-    result = finger.solver.solve(finger.pressure, finger.force, initial=finger.last)
-    if not result.success:
+    if not finger.has_pressure:
+        return
+    (update,) = core.process([finger.index], msg.log_time)
+    if update.result is None:
         report.failures += 1
         return
-    finger.last = result
     report.solves += 1
     k = (None, None)
     if rigidity_period is not None:
-        k = finger.rigidity.get(finger.pressure)
         recent = (finger.last_rigidity is not None and rigidity_period > 0.0
                   and msg.log_time - finger.last_rigidity_time < rigidity_period * 1e9)
-        if k is None and recent:
+        if recent:
             k = finger.last_rigidity
-        elif k is None:
-            k = tuple(finger.solver.rigidity(finger.pressure, axis=axis).value
-                      for axis in ('x', 'z'))
-            finger.rigidity[finger.pressure] = k
+        else:
+            k = (core.rigidity(finger.index, 'x'), core.rigidity(finger.index, 'z'))
             finger.last_rigidity, finger.last_rigidity_time = k, msg.log_time
             report.rigidity_solves += 2
     outputs = {
-        'shape': serialized_shape(result, finger.name, stamp),
-        'curvature': serialize(curvature_message(result)),
-        'rigidity': serialize(rigidity_message(k[0], k[1], finger.name, stamp)),
+        'shape': serialized_shape(update.result, finger.name, update.stamp_ns),
+        'curvature': serialize(curvature_message(update.result)),
+        'rigidity': serialize(rigidity_message(k[0], k[1], finger.name, update.stamp_ns)),
     }
     for kind, data in outputs.items():
         topic = finger.prefix + finger_topic(finger.name, kind)
-        writer.write(topic, data, msg.log_time, stamp)
+        writer.write(topic, data, msg.log_time, update.stamp_ns)
         report.outputs[topic] = report.outputs.get(topic, 0) + 1
 
 
@@ -449,6 +457,15 @@ def _size(text):
     if not match:
         raise argparse.ArgumentTypeError(f'--size must be WIDTHxHEIGHT in pixels, got {text!r}')
     return int(match[1]), int(match[2])
+
+
+def _model_settings(args):
+    from ..model.pipeline import ModelSettings
+    try:
+        return ModelSettings(tolerance=args.tolerance, n_segments=args.segments,
+                             pressure_model=args.pressure_model)
+    except (TypeError, ValueError) as exc:
+        raise McapInputError(str(exc)) from None
 
 
 def build_parser():
@@ -506,9 +523,22 @@ def build_parser():
     p.add_argument('output', type=pathlib.Path, metavar='OUT', help='output MCAP file')
     p.add_argument('--config', type=pathlib.Path, default=None,
                    help='gripper configuration YAML (default: the package default)')
-    p.add_argument('--segments', type=int, default=8, help='CCM segments (default 8)')
-    p.add_argument('--pressure-model', choices=('adiabatic', 'isobaric'), default='adiabatic',
-                   help='pressure work model (default adiabatic)')
+    from ..model.pipeline import ModelSettings
+    from ..nodes.model_core import DEFAULT_STALE_AFTER_S
+    defaults = ModelSettings()
+    p.add_argument('--tolerance', type=float, default=defaults.tolerance, metavar='M',
+                   help='tip-position tolerance of the finger model against the rod [m], as '
+                        f"model_node's parameter (default {defaults.tolerance:g}; 0: the "
+                        'paper CCM with --segments)')
+    p.add_argument('--segments', type=int, default=defaults.n_segments,
+                   help=f'CCM segments with --tolerance 0 (default {defaults.n_segments})')
+    p.add_argument('--pressure-model', choices=('adiabatic', 'isobaric'),
+                   default=defaults.pressure_model,
+                   help=f'pressure work model (default {defaults.pressure_model})')
+    p.add_argument('--stale-after', type=float, default=DEFAULT_STALE_AFTER_S, metavar='S',
+                   help='reject inputs whose stamp is older than S against their log time, '
+                        f"as model_node's stale_after_s (default {DEFAULT_STALE_AFTER_S:g}; "
+                        '0 disables)')
     p.add_argument('--source', choices=('auto', 'pressure', 'pressure_command'),
                    default='auto', help='pressure topic to replay (default: measured '
                                         'pressure if recorded, else pressure_command)')
@@ -564,15 +594,16 @@ def _run(args, out, err):
               file=out)
     elif args.command == 'replay-model':
         progress = None if args.quiet else _progress_printer(err)
-        report = replay_model(args.input, args.output, config=args.config,
-                              n_segments=args.segments, pressure_model=args.pressure_model,
+        settings = _model_settings(args)
+        report = replay_model(args.input, args.output, config=args.config, settings=settings,
                               source=args.source, rigidity=not args.no_rigidity,
                               rigidity_period=args.rigidity_period,
-                              copy_inputs=args.copy_inputs, compression=args.compression,
-                              progress=progress)
+                              stale_after_s=args.stale_after, copy_inputs=args.copy_inputs,
+                              compression=args.compression, progress=progress)
         print(f'replayed {report.inputs} inputs of {", ".join(report.fingers)}: '
               f'{report.solves} solves, {report.failures} not converged, '
-              f'{report.clipped} below atmospheric -> {args.output}', file=out)
+              f'{report.rejected} rejected, {report.clipped} below atmospheric '
+              f'-> {args.output}', file=out)
     return 0
 
 

@@ -142,8 +142,9 @@ class _LadderSolver:
         tip_force : (float, float)
             (f0, p0), tip force along global X and Z [N].
         initial : result of this solver, optional
-            Warm start; it also seeds continuation from its own loading. None
-            starts from the flat, unstrained state.
+            Warm start: Newton starts there, and if that does not reach a stable
+            equilibrium the solve starts again from the flat, unstrained state as
+            with None. It changes the iteration count, never the answer.
 
         Returns
         -------
@@ -152,32 +153,32 @@ class _LadderSolver:
 
         """
         pressure, force = _check_solve(pressure, tip_force)
-        if initial is None:
-            state0, seed = self._flat_state(), None
-        elif isinstance(initial, self._result_type) and initial.solver._compatible(self):
-            state0, seed = initial.state, initial
-        else:
+        if initial is not None and not (isinstance(initial, self._result_type)
+                                        and initial.solver._compatible(self)):
             raise ValueError(f'`initial` must be None or a {self._result_type.__name__} of a '
                              'solver with the same discretisation')
-        state, status, its, step = self._newton(state0, pressure, force)
+        its = 0
+        if initial is not None:
+            # A warm start only saves iterations: if it does not reach a stable equilibrium
+            # the solve starts again exactly as a fresh one.
+            state, status, its, step = self._newton(initial.state, pressure, force)
+            if status is SolverStatus.SUCCESS:
+                return self._result_type(self, state, status, its, step, pressure, force)
+        flat = self._flat_state()
+        state, status, n, step = self._newton(flat, pressure, force)
+        its += n
         if status in (SolverStatus.SUCCESS, SolverStatus.UNSTABLE):
             return self._result_type(self, state, status, its, step, pressure, force)
-        # Continuation: march pressure and load from the seed's loading (or zero) to the target.
-        if seed is not None:
-            p_start, f_start, state = seed.pressure, np.array(seed.tip_force), seed.state
-        else:
-            p_start, f_start = 0.0, np.zeros(2)
-            state, status, n, step = self._newton(state0, 0.0, np.zeros(2))
-            its += n
-            if status is not SolverStatus.SUCCESS:
-                return self._result_type(self, state, SolverStatus.CONTINUATION_FAILED, its,
-                                         step, pressure, force, fraction=0.0)
+        # Continuation: march pressure and load from the unloaded state to the target.
+        state, status, n, step = self._newton(flat, 0.0, np.zeros(2))
+        its += n
+        if status is not SolverStatus.SUCCESS:
+            return self._result_type(self, state, SolverStatus.CONTINUATION_FAILED, its,
+                                     step, pressure, force, fraction=0.0)
         lam, dlam = 0.0, 0.25
         while True:
             target = min(1.0, lam + dlam)
-            p = p_start + target * (pressure - p_start)
-            f = f_start + target * (force - f_start)
-            new, status, n, step = self._newton(state, p, f)
+            new, status, n, step = self._newton(state, target * pressure, target * force)
             its += n
             if status is SolverStatus.SUCCESS:
                 state, lam = new, target

@@ -17,8 +17,8 @@ from .solver import CCMSolver, PRESSURE_MODELS
 from .validation import real_number
 
 __all__ = ['Scene', 'ModelChoice', 'RUNGS', 'choose_model', 'load_error_model', 'make_solver',
-           'a_posteriori_error', 'solve_auto_refine', 'RefinedResult', 'aligned_edges',
-           'AdaptiveSolver']
+           'scene_turning', 'a_posteriori_error', 'solve_auto_refine', 'RefinedResult',
+           'aligned_edges', 'AdaptiveSolver']
 
 #: Rungs of the ladder: uniform arc (a), CCM with the paper's reconstruction, CCM with the
 #: consistent reconstruction (uniform segments, or 'ccm_aligned': segment edges on every
@@ -87,7 +87,8 @@ class ModelChoice:
     reason : str
         Why this model was chosen.
     cost : float
-        Median solve time measured by bench/bench_ladder.py [s] (nan if unknown).
+        Static cost of the model: unknowns x median Newton iterations of its cold solves
+        on the ladder scenes (bench/bench_ladder.py); the same on every machine.
 
     """
 
@@ -181,11 +182,75 @@ def load_error_model(path=None):
     return _load_cached(str(path))
 
 
-def _scene_features(scene):
-    """Return (turning |kappa L| of the arc rung [rad], arc result) of a scene."""
-    arc = ArcSolver(scene.design, pressure_model=scene.pressure_model)
-    result = arc.solve(scene.pressure, scene.tip_force)
-    return abs(float(result.beta[0])), result
+#: Pressure spacing of the unloaded feature table [Pa].
+_FEATURE_STEP = 5e3
+_FEATURE_CACHE = 256
+
+
+class _ArcFeature:
+    """
+    The scene feature of `choose_model` for one design: the arc rung's turning |kappa L|.
+
+    Unloaded, it is read from a table of arc solves every 5 kPa over the error model's
+    pressure range, interpolated by PCHIP (3e-8 rad from a direct solve). Loaded, the arc
+    is solved from the table state nearest in pressure. Both are functions of the scene
+    alone: the table is built the same way every time, and a warm start never changes the
+    converged answer, so every caller that asks for a scene gets the same feature.
+    """
+
+    def __init__(self, design, pressure_model, top):
+        self.arc = ArcSolver(design, pressure_model=pressure_model)
+        self.grid = np.linspace(0.0, top, int(round(top / _FEATURE_STEP)) + 1)
+        state, self.states = None, []
+        for pressure in self.grid:
+            state = self.arc.solve(pressure, (0.0, 0.0), initial=state)
+            self.states.append(state if state.success else None)
+            state = state if state.success else None
+        # Signed: |beta| has a kink where the finger passes flat.
+        self.table = None
+        if all(s is not None for s in self.states):
+            self.table = PchipInterpolator(self.grid, [float(s.beta[0]) for s in self.states])
+        self._loaded = {}
+
+    def turning(self, pressure, tip_force):
+        """Return |kappa L| of the arc rung [rad]; inf when the arc has no equilibrium."""
+        if self.table is not None and tip_force == (0.0, 0.0) and pressure <= self.grid[-1]:
+            return abs(float(self.table(pressure)))
+        key = (pressure,) + tuple(tip_force)
+        if key not in self._loaded:
+            nearest = self.states[int(np.argmin(np.abs(self.grid - pressure)))]
+            arc = self.arc.solve(pressure, tip_force, initial=nearest)
+            if len(self._loaded) >= _FEATURE_CACHE:
+                self._loaded.clear()
+            self._loaded[key] = abs(float(arc.beta[0])) if arc.success else math.inf
+        return self._loaded[key]
+
+
+@functools.lru_cache(maxsize=16)
+def _arc_feature(design, pressure_model, top):
+    return _ArcFeature(design, pressure_model, top)
+
+
+def scene_turning(scene, error_model=None):
+    """
+    Return the feature `choose_model` bins a scene by: the arc rung's turning [rad].
+
+    Parameters
+    ----------
+    scene : Scene
+    error_model : dict, optional
+        Default: `load_error_model()`; its pressure range sets the unloaded table.
+
+    Returns
+    -------
+    float
+        |kappa L| of the arc rung [rad]; inf if the arc finds no equilibrium.
+
+    """
+    model = load_error_model() if error_model is None else error_model
+    feature = _arc_feature(scene.design, scene.pressure_model,
+                           float(model['ranges']['pressure'][1]))
+    return feature.turning(scene.pressure, scene.tip_force)
 
 
 def choose_model(scene, tolerance, error_model=None):
@@ -194,12 +259,14 @@ def choose_model(scene, tolerance, error_model=None):
 
     The error model (bench/bench_ladder.py) stores, for every rung and N, the
     largest measured tip-position error against the rod in bins of the scene's
-    turning |kappa L| (estimated here by the arc rung, about 1 ms) and of the
-    tip-load magnitude, made non-decreasing in both, and whether any scene of
-    the bin broke the CCM's small-rotation rule. A model is eligible in a bin
-    that has data, no invalid state and bound * safety <= tolerance; the
-    cheapest eligible model by measured median time wins. Scenes outside the
-    measured ranges (prestrain, pressure, load, turning) get the rod.
+    turning |kappa L| (`scene_turning`, from the arc rung) and of the tip-load
+    magnitude, made non-decreasing in both, and whether any scene of the bin broke
+    the CCM's small-rotation rule. A model is eligible in a bin that has data, no
+    invalid state and bound * safety <= tolerance; the eligible model of least
+    static cost (unknowns x iterations, ties broken by rung and N) wins. Scenes
+    outside the measured ranges (prestrain, pressure, load, turning) get the rod.
+    The choice is a function of (design, scene, tolerance) alone: no timing, call
+    history or cache enters it.
 
     Parameters
     ----------
@@ -220,8 +287,7 @@ def choose_model(scene, tolerance, error_model=None):
     if tolerance <= 0.0:
         raise ValueError(f'`tolerance` must be > 0 [m], got {tolerance}')
     model = load_error_model() if error_model is None else error_model
-    turning, _ = _scene_features(scene)
-    return _choose(model, _scene_bin(model, scene, turning), tolerance)
+    return _choose(model, _scene_bin(model, scene, scene_turning(scene, model)), tolerance)
 
 
 def _scene_bin(model, scene, turning):
@@ -249,9 +315,17 @@ def _scene_bin(model, scene, turning):
             int(np.searchsorted(load_edges, scene.load * (1 - 1e-12), side='left')))
 
 
+def _static_cost(entry):
+    """Sort key of a model: its static cost, then its rung and N (never a measured time)."""
+    if 'cost' not in entry:
+        raise ValueError('the error model has no static costs; run bench/bench_ladder.py '
+                         '--costs-only')
+    return float(entry['cost']), RUNGS.index(entry['rung']), int(entry['n_segments'])
+
+
 def _choose(model, cell, tolerance):
     """Return the cheapest model whose measured bound in `cell` meets `tolerance`."""
-    rod_cost = next((m['time'] for m in model['models'] if m['rung'] == 'rod'), float('nan'))
+    rod_cost = next((m['cost'] for m in model['models'] if m['rung'] == 'rod'), float('nan'))
     if isinstance(cell[0], str):
         return ModelChoice('rod', 0, 0.0, 'outside the measured envelope ('
                            + ', '.join(cell) + '): geometrically exact rod', rod_cost)
@@ -259,7 +333,7 @@ def _choose(model, cell, tolerance):
     where = (f"turning bin {t_bin} (<= {model['turning_bins'][t_bin]:.2f} rad) and load bin "
              f"{l_bin} (<= {model['load_bins'][l_bin]:g} N)")
     safety = float(model['safety'])
-    for entry in sorted(model['models'], key=lambda m: m['time']):
+    for entry in sorted(model['models'], key=_static_cost):
         if entry['rung'] == 'rod':
             continue
         bound = entry['bound'][l_bin][t_bin]
@@ -268,7 +342,7 @@ def _choose(model, cell, tolerance):
         if bound * safety <= tolerance:
             return ModelChoice(entry['rung'], int(entry['n_segments']), float(bound * safety),
                                f'cheapest measured model with bound {bound * safety:.2e} m '
-                               f'<= {tolerance:g} m at {where}', float(entry['time']))
+                               f'<= {tolerance:g} m at {where}', float(entry['cost']))
     return ModelChoice('rod', 0, 0.0, f'no cheaper model meets {tolerance:g} m at {where}',
                        rod_cost)
 
@@ -398,9 +472,9 @@ class AdaptiveSolver:
     Each solve picks the cheapest rung and N that `choose_model` predicts to meet
     `tolerance` for that pressure and tip force, and doubles N while a segment
     breaks the small-rotation rule or the solve fails. Unloaded scenes get
-    coarser models than loaded, strongly curled ones. The choice is the one
-    `choose_model` makes (see `choose` for how its feature is obtained cheaply),
-    cached per cell of the error model.
+    coarser models than loaded, strongly curled ones. The choice is exactly the
+    one `choose_model` makes for the scene: a pure function of (design, scene,
+    tolerance), whatever was solved before.
 
     Parameters
     ----------
@@ -412,11 +486,6 @@ class AdaptiveSolver:
         Largest N that refinement may reach.
     error_model : dict, optional
         Default: `load_error_model()`.
-
-    Attributes
-    ----------
-    last_choice : ModelChoice or None
-        The choice behind the last solve, with the N actually used after refinement.
 
     """
 
@@ -434,58 +503,23 @@ class AdaptiveSolver:
         self.pressure_model = pressure_model
         self.max_segments = int(max_segments)
         self._model = load_error_model() if error_model is None else error_model
-        self._arc = ArcSolver(design, pressure_model=pressure_model)
-        self._arc_state = None
-        self._turning_table = self._unloaded_turning_table()
-        self._loaded_turning = {}
+        # Built here so that the first solve does not pay for the unloaded feature table.
+        scene_turning(Scene(design, 0.0, (0.0, 0.0), pressure_model), self._model)
         self._solvers = {}
         self._choices = {}
-        self.last_choice = None
 
     def choose(self, pressure, tip_force):
         """
-        Return the ModelChoice for a scene, as `choose_model` makes it.
+        Return the ModelChoice for a scene: ``choose_model(Scene(...), tolerance)``.
 
-        The scene's feature is the arc rung's turning |kappa L|. Unloaded, it is
-        read from a table of arc solves over the error model's pressure range
-        (built with the solver, every 5 kPa, interpolated by PCHIP; the
-        interpolation error only matters within that distance of a bin edge).
-        Loaded, the arc is solved, warm-started, and cached per 1 kPa and 5 mN.
-        Choices are cached per error-model cell.
+        Choices are cached per error-model cell, which the choice is a function of.
         """
         scene = Scene(self.design, pressure, tuple(tip_force), self.pressure_model)
-        cell = _scene_bin(self._model, scene, self._turning(scene))
+        cell = _scene_bin(self._model, scene, scene_turning(scene, self._model))
         choice = self._choices.get(cell)
         if choice is None:
             choice = self._choices[cell] = _choose(self._model, cell, self.tolerance)
         return choice
-
-    def _unloaded_turning_table(self, step=5e3):
-        """PCHIP of the unloaded arc's signed turning over the error model's pressures [rad]."""
-        top = self._model['ranges']['pressure'][1]
-        grid = np.linspace(0.0, top, int(round(top / step)) + 1)
-        state, values = None, []
-        for p in grid:
-            state = self._arc.solve(p, (0.0, 0.0), initial=state)
-            if not state.success:
-                state = self._arc.solve(p, (0.0, 0.0))
-            # Signed: |beta| has a kink where the finger passes flat.
-            values.append(float(state.beta[0]))
-        return PchipInterpolator(grid, values)
-
-    def _turning(self, scene):
-        """Return the arc rung's turning |kappa L| for a scene [rad]."""
-        if scene.load == 0.0 and scene.pressure <= self._turning_table.x[-1]:
-            return abs(float(self._turning_table(scene.pressure)))
-        key = (round(scene.pressure / 1e3), round(scene.tip_force[0] / 5e-3),
-               round(scene.tip_force[1] / 5e-3))
-        if key not in self._loaded_turning:
-            arc = self._arc.solve(scene.pressure, scene.tip_force, initial=self._arc_state)
-            if not arc.success:
-                arc = self._arc.solve(scene.pressure, scene.tip_force)
-            self._arc_state = arc if arc.success else None
-            self._loaded_turning[key] = abs(float(arc.beta[0]))
-        return self._loaded_turning[key]
 
     def solver_for(self, rung, n_segments):
         """Return the (cached) solver of a rung and N."""
@@ -502,7 +536,8 @@ class AdaptiveSolver:
         Solve with the model the scene needs; see `CCMSolver.solve`.
 
         `initial` warm-starts only a result of the same underlying solver; a model
-        change starts from the flat state. The result carries `model_choice`.
+        change starts from the flat state. The result carries `model_choice`, with
+        the N actually used after refinement.
         """
         choice = self.choose(pressure, tip_force)
         rung, n = choice.rung, choice.n_segments
@@ -513,10 +548,9 @@ class AdaptiveSolver:
             if (result.success and result.valid) or not refinable:
                 break
             n *= 2
-        self.last_choice = ModelChoice(rung, n, choice.predicted_error,
-                                       choice.reason if n == choice.n_segments else
-                                       f'{choice.reason}; refined to N = {n}', choice.cost)
-        result.model_choice = self.last_choice
+        result.model_choice = ModelChoice(rung, n, choice.predicted_error,
+                                          choice.reason if n == choice.n_segments else
+                                          f'{choice.reason}; refined to N = {n}', choice.cost)
         return result
 
     def rigidity(self, pressure=0.0, axis='x', displacement=0.010, initial=None):

@@ -418,22 +418,23 @@ class CCMSolver:
             math.nan
 
     def _initial_state(self, initial):
+        """Scaled warm start from a result or an (N, 4) SI array; None for a fresh solve."""
         n = self.n_segments
         if initial is None:
-            return np.zeros((n, 4)), None
+            return None
         if isinstance(initial, CCMResult):
             if initial.solver is not self and not np.array_equal(
                     initial.solver.segments.edges, self.segments.edges):
                 raise ValueError('`initial` result comes from a different segmentation; '
                                  f'expected {n} segments with the same edges')
-            return initial.q.copy(), initial
+            return initial.q.copy()
         arr = np.asarray(initial, dtype=float)
         if arr.shape != (n, 4):
             raise ValueError(f'`initial` must be a CCMResult or an ({n}, 4) array of '
                              f'(b1, b3, c1, d) in SI, got shape {arr.shape}')
         if not np.all(np.isfinite(arr)):
             raise ValueError('`initial` must be finite')
-        return to_scaled(arr, self.segments.lengths), None
+        return to_scaled(arr, self.segments.lengths)
 
     def solve(self, pressure=0.0, tip_force=(0.0, 0.0), initial=None, point_loads=()):
         """
@@ -446,8 +447,9 @@ class CCMSolver:
         tip_force : (float, float)
             (f0, p0), tip force along global X and Z [N].
         initial : CCMResult or array_like (N, 4), optional
-            Warm start; a result also seeds continuation from its own loading.
-            None starts from the flat state.
+            Warm start: Newton starts there, and if that does not reach a stable
+            equilibrium the solve starts again from the flat state as with None. It
+            changes the iteration count, never the answer.
         point_loads : sequence of (s, fx, fz)
             Extra loads at intermediate arc lengths s that are segment edges [m, N, N].
 
@@ -473,30 +475,35 @@ class CCMSolver:
         if np.shape(tip_force) != (2,):
             raise ValueError(f'`tip_force` must be (f0, p0) [N], got {tip_force!r}')
         loads = self._loads(tip_force, point_loads)
-        q0, seed = self._initial_state(initial)
-        q, status, its, grad, step, min_eig = self._newton(q0, pressure, loads)
+        q0 = self._initial_state(initial)
+        spent = 0
+        if q0 is not None:
+            # A warm start only saves iterations: if it does not reach a stable equilibrium
+            # the solve starts again exactly as a fresh one, so the answer never depends on
+            # what was solved before.
+            q, status, its, grad, step, min_eig = self._newton(q0, pressure, loads)
+            if status is SolverStatus.SUCCESS:
+                return CCMResult(self, q, status, its, grad, step, pressure, loads,
+                                 tip_force, min_eig)
+            spent = its
+        flat = np.zeros((self.n_segments, 4))
+        q, status, its, grad, step, min_eig = self._newton(flat, pressure, loads)
+        spent += its
         if status is SolverStatus.SUCCESS or status is SolverStatus.UNSTABLE:
-            return CCMResult(self, q, status, its, grad, step, pressure, loads, tip_force,
+            return CCMResult(self, q, status, spent, grad, step, pressure, loads, tip_force,
                              min_eig)
-        return self._continuation(q0, seed, pressure, loads, tip_force, its)
+        return self._continuation(flat, pressure, loads, tip_force, spent)
 
-    def _continuation(self, q0, seed, pressure, loads, tip_force, spent):
-        """March pressure and loads from the seed's loading (or zero) to the target."""
-        if seed is not None:
-            p_start, loads_start = seed.pressure, seed.point_loads
-            q = q0
-        else:
-            p_start, loads_start = 0.0, []
-            q, status, its, *_ = self._newton(q0, 0.0, [])
-            spent += its
-            if status is not SolverStatus.SUCCESS:
-                return CCMResult(self, q, SolverStatus.CONTINUATION_FAILED, spent, math.inf,
-                                 math.inf, pressure, loads, tip_force, fraction=0.0)
+    def _continuation(self, q0, pressure, loads, tip_force, spent):
+        """March pressure and loads from the unloaded flat state to the target."""
+        q, status, its, *_ = self._newton(q0, 0.0, [])
+        spent += its
+        if status is not SolverStatus.SUCCESS:
+            return CCMResult(self, q, SolverStatus.CONTINUATION_FAILED, spent, math.inf,
+                             math.inf, pressure, loads, tip_force, fraction=0.0)
 
         def loading(lam):
-            mixed = [(n, lam * f) for n, f in loads]
-            mixed += [(n, (1.0 - lam) * f) for n, f in loads_start]
-            return p_start + lam * (pressure - p_start), mixed
+            return lam * pressure, [(n, lam * f) for n, f in loads]
 
         lam, dlam = 0.0, 0.25
         while lam < 1.0:

@@ -53,6 +53,8 @@ from fpc_gripper.control.inverse import InverseModel
 from fpc_gripper.io.config import default_gripper_config_path
 from fpc_gripper.io.config import load_gripper_config
 from fpc_gripper.model import PRESSURE_MODELS
+from fpc_gripper.model.pipeline import MAX_SEGMENTS
+from fpc_gripper.model.pipeline import ModelSettings
 from fpc_gripper.nodes.parameters import declare_table
 from fpc_gripper.nodes.parameters import float_range
 from fpc_gripper.nodes.parameters import int_range
@@ -73,12 +75,18 @@ _LAW_PARAMETERS = ('max_pressure', 'slew_rate_pa_s', 'approach_rate_pa_s', 'kp',
 def _parameter_table(config_max_pressure):
     """Return ``(name, default, description, extra descriptor fields)`` of every parameter."""
     defaults = ControllerConfig()
+    model = ModelSettings()
     return (
         ('gripper_config', str(default_gripper_config_path()),
          'Gripper YAML: fingers, palm radius, pressure limit.', {'read_only': True}),
-        ('n_segments', 8, 'CCM segments of the finger model.',
-         {'read_only': True, 'integer_range': int_range(1, 64)}),
-        ('pressure_model', 'adiabatic', f'Pressure work model, one of {list(PRESSURE_MODELS)}.',
+        ('tolerance', model.tolerance,
+         "Finger model's tip-position tolerance against the rod [m], as model_node's "
+         '(0: the paper CCM with n_segments); set both nodes alike.',
+         {'read_only': True, 'floating_point_range': float_range(0.0, 0.05)}),
+        ('n_segments', model.n_segments, 'CCM segments of the finger model when tolerance '
+         'is 0.', {'read_only': True, 'integer_range': int_range(1, MAX_SEGMENTS)}),
+        ('pressure_model', model.pressure_model,
+         f'Pressure work model, one of {list(PRESSURE_MODELS)}.',
          {'read_only': True, 'additional_constraints': f'one of {list(PRESSURE_MODELS)}'}),
         ('max_pressure', config_max_pressure,
          'Largest command [Pa gauge]; at most the gripper config max_pressure.',
@@ -154,13 +162,14 @@ class GripperController(Node):
         if not result.successful:
             raise ValueError(result.reason)
         self._names = config.names
+        settings = ModelSettings(tolerance=self.get_parameter('tolerance').value,
+                                 n_segments=self.get_parameter('n_segments').value,
+                                 pressure_model=self.get_parameter('pressure_model').value)
         models = {}
         for finger in config.fingers:
             if finger.design not in models:
                 models[finger.design] = InverseModel(
-                    finger.design, config.palm_radius, config.max_pressure,
-                    n_segments=self.get_parameter('n_segments').value,
-                    pressure_model=self.get_parameter('pressure_model').value)
+                    finger.design, config.palm_radius, config.max_pressure, settings)
         self._law = GripperControlLaw([models[f.design] for f in config.fingers],
                                       PalmGeometry.from_config(config), self._law_config())
         n = len(self._names)

@@ -118,7 +118,14 @@ class VirtualObjectNode(Node):
         gauge = msg.fluid_pressure - self.get_parameter('atmospheric_pressure').value
         if not math.isfinite(gauge):
             return
-        force = self._cylinders[index].force(max(gauge, 0.0))
+        try:
+            force = self._cylinders[index].force(max(gauge, 0.0))
+        except (RuntimeError, ValueError, ArithmeticError) as exc:
+            # No contact force can be given for this pressure: publish none, so the model
+            # node keeps the last one it had.
+            self.get_logger().error(f'{self._names[index]}: no contact force at {gauge:.0f} '
+                                    f'Pa gauge: {exc}', throttle_duration_sec=2.0)
+            return
         self.forces[index] = force
         out = WrenchStamped()
         out.header.stamp = self.get_clock().now().to_msg()
@@ -347,10 +354,10 @@ def run_session(output_dir, object_diameter=0.040, grasp_force=0.5, open_apertur
         nodes.append(RegulatorBridge.create_active(parameter_overrides=[
             cfg, Parameter('backend', value='sim'), Parameter('publish_rate_hz', value=50.0)],
             **common))
-        # tolerance 0: the paper CCM8 that the controller's inverse model and the virtual
-        # object also use, so the session is one consistent plant.
+        # Default model settings throughout: the model node, the controller's inverse and
+        # the virtual object all compute the finger through the same pipeline.
         nodes.append(ModelNode(parameter_overrides=[
-            cfg, Parameter('tolerance', value=0.0), Parameter('pressure_input', value='measured'),
+            cfg, Parameter('pressure_input', value='measured'),
             Parameter('max_rate_hz', value=10.0)], **common))
         nodes.append(GripperController(parameter_overrides=[cfg], **common))
         virtual = VirtualObjectNode(parameter_overrides=[

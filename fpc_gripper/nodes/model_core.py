@@ -7,13 +7,17 @@ import time
 
 import numpy as np
 
-__all__ = ['RATE_BURST', 'RIGIDITY_DISPLACEMENT', 'FingerState', 'FingerStatus', 'InputCheck',
-           'Level', 'ModelCore', 'Rejection', 'Update', 'check_pressure', 'check_tip_force',
-           'stale_detail']
+from fpc_gripper.model.pipeline import model_label
+
+__all__ = ['DEFAULT_STALE_AFTER_S', 'RATE_BURST', 'RIGIDITY_DISPLACEMENT', 'FingerState',
+           'FingerStatus', 'InputCheck', 'Level', 'ModelCore', 'Rejection', 'Update',
+           'check_pressure', 'check_tip_force', 'stale_detail']
 
 #: Capacity of each finger's solve-rate token bucket: sustained rate <= max_rate_hz, bursts
 #: of at most this many back-to-back solves [solves].
 RATE_BURST = 2.0
+#: Default largest age of an input's header stamp [s] (model_node's stale_after_s).
+DEFAULT_STALE_AFTER_S = 1.0
 #: Tip displacement of the rigidity computation, eq. (22) [m].
 RIGIDITY_DISPLACEMENT = 0.010
 _SOLVER_ERRORS = (ValueError, TypeError, ArithmeticError, np.linalg.LinAlgError)
@@ -295,17 +299,6 @@ def _real_in_range(name, value, low, high, unit):
     if not (math.isfinite(value) and low <= value <= high):
         raise ValueError(f'`{name}` must be in [{low:g}, {high:g}] {unit}, got {value}')
     return value
-
-
-def _model_label(result):
-    """Rung and N of the model behind a result, e.g. 'ccm_aligned N=22' or 'ccm N=8'."""
-    if result is None:
-        return 'none'
-    choice = getattr(result, 'model_choice', None)
-    if choice is not None:
-        return f'{choice.rung} N={choice.n_segments}' if choice.n_segments else choice.rung
-    segments = getattr(getattr(result, 'solver', None), 'n_segments', None)
-    return f'ccm N={segments}' if segments else type(result).__name__
 
 
 class ModelCore:
@@ -731,7 +724,7 @@ class ModelCore:
             'pressure_pa': pressure,
             'tip_force': f'f0={force[0]:.6g} N, p0={force[1]:.6g} N',
             'iterations': str(state.iterations),
-            'model': _model_label(result),
+            'model': model_label(result),
             'solve_time_ms': f'{state.solve_time_s * 1e3:.3f}',
             'valid': str(valid),
             'last_rejection': state.last_rejection,

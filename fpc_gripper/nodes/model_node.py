@@ -38,8 +38,11 @@ from fpc_gripper.io.messages import serialized_shape
 from fpc_gripper.io.messages import shape_marker
 from fpc_gripper.io.messages import shape_message
 from fpc_gripper.io.messages import time_to_ns
-from fpc_gripper.model import AdaptiveSolver, CCMSolver
 from fpc_gripper.model import PRESSURE_MODELS
+from fpc_gripper.model.pipeline import finger_model
+from fpc_gripper.model.pipeline import MAX_SEGMENTS
+from fpc_gripper.model.pipeline import ModelSettings
+from fpc_gripper.nodes.model_core import DEFAULT_STALE_AFTER_S
 from fpc_gripper.nodes.model_core import Level
 from fpc_gripper.nodes.model_core import ModelCore
 from fpc_gripper.nodes.parameters import declare_table
@@ -47,6 +50,8 @@ from fpc_gripper.nodes.parameters import float_range
 from fpc_gripper.nodes.parameters import int_range
 
 PRESSURE_INPUTS = ('command', 'measured')
+# The model settings every consumer of the finger pipeline defaults to.
+_DEFAULTS = ModelSettings()
 _CHOICES = {'pressure_model': tuple(PRESSURE_MODELS), 'pressure_input': PRESSURE_INPUTS}
 # Parameters whose change rebuilds the solvers.
 _SOLVER_PARAMETERS = ('n_segments', 'pressure_model', 'tolerance')
@@ -93,15 +98,15 @@ def _parameter_table():
         ('gripper_config', str(default_gripper_config_path()),
          'Gripper YAML: one set of topics per finger, named and framed finger_<i>.',
          {'read_only': True}),
-        ('tolerance', 0.5e-3,
+        ('tolerance', _DEFAULTS.tolerance,
          'Tip-position tolerance against the geometrically exact rod [m]: per scene the node '
          'uses the cheapest model that meets it (fpc_gripper.model.AdaptiveSolver), refining '
          'when a segment passes 45 degrees. 0 uses the paper CCM with a fixed n_segments.',
          {'floating_point_range': float_range(0.0, 0.05)}),
-        ('n_segments', 8, 'Number N of CCM segments per finger when tolerance is 0; a change '
-         'rebuilds the solvers.',
-         {'integer_range': int_range(1, 64)}),
-        ('pressure_model', 'adiabatic',
+        ('n_segments', _DEFAULTS.n_segments, 'Number N of CCM segments per finger when '
+         'tolerance is 0; a change rebuilds the solvers.',
+         {'integer_range': int_range(1, MAX_SEGMENTS)}),
+        ('pressure_model', _DEFAULTS.pressure_model,
          "Pressure work: 'adiabatic' (k_p = 1/(gamma - 1), paper eq. 20) or 'isobaric' "
          '(k_p = 1); a change rebuilds the solvers.',
          {'additional_constraints': f'one of {list(PRESSURE_MODELS)}'}),
@@ -115,7 +120,7 @@ def _parameter_table():
         ('atmospheric_pressure', 101325.0,
          'Atmospheric pressure [Pa]: gauge = absolute - atmospheric_pressure.',
          {'floating_point_range': float_range(3.0e4, 1.2e5)}),
-        ('stale_after_s', 1.0,
+        ('stale_after_s', DEFAULT_STALE_AFTER_S,
          'Inputs whose header stamp is older than this against the node clock are rejected '
          '[s]; 0 disables. Unstamped (zero) headers are never stale.',
          {'floating_point_range': float_range(0.0, 3600.0)}),
@@ -144,8 +149,9 @@ class ModelNode(Node):
     node_name : str
         Node name.
     solver_factory : callable, optional
-        ``solver_factory(design, n_segments=..., pressure_model=...)``; default
-        :class:`~fpc_gripper.model.CCMSolver`. See `_create_solver`.
+        ``solver_factory(design, settings)`` with a
+        :class:`~fpc_gripper.model.pipeline.ModelSettings`; default
+        :func:`~fpc_gripper.model.pipeline.finger_model`, the one finger pipeline.
     **kwargs
         Passed to :class:`rclpy.node.Node` (namespace, parameter_overrides, context, ...).
 
@@ -173,7 +179,7 @@ class ModelNode(Node):
                                             for n, *_ in _parameter_table()])
         if not result.successful:
             raise ValueError(result.reason)
-        self._solver_factory = solver_factory or CCMSolver
+        self._solver_factory = solver_factory or finger_model
         self._lock = threading.RLock()
         # Rate budget and timers run on steady time (time.monotonic_ns), so that they keep
         # going while a simulated clock stands still; staleness uses the node clock.
@@ -227,29 +233,16 @@ class ModelNode(Node):
         """Finger names of the gripper config, in index order."""
         return self._core.names
 
+    def settings(self):
+        """Return the :class:`~fpc_gripper.model.pipeline.ModelSettings` of the parameters."""
+        param = self.get_parameter
+        return ModelSettings(tolerance=param('tolerance').value,
+                             n_segments=param('n_segments').value,
+                             pressure_model=param('pressure_model').value)
+
     def _create_solver(self, design):
-        """
-        Build the solver of one design from the parameters (the single place solvers are made).
-
-        Parameters
-        ----------
-        design : ActuatorDesign
-            The finger design.
-
-        Returns
-        -------
-        AdaptiveSolver or CCMSolver
-            An AdaptiveSolver while `tolerance` > 0, else a CCMSolver with `n_segments`;
-            an injected factory is always used as given.
-
-        """
-        tolerance = self.get_parameter('tolerance').value
-        if tolerance > 0.0 and self._solver_factory is CCMSolver:
-            return AdaptiveSolver(design, tolerance=tolerance,
-                                  pressure_model=self.get_parameter('pressure_model').value)
-        return self._solver_factory(design,
-                                    n_segments=self.get_parameter('n_segments').value,
-                                    pressure_model=self.get_parameter('pressure_model').value)
+        """Build the solver of one design through the finger pipeline (or the injected one)."""
+        return self._solver_factory(design, self.settings())
 
     # -- set-up -----------------------------------------------------------------------------
 

@@ -5,7 +5,8 @@ import math
 import numpy as np
 
 from fpc_gripper.control.controller import FingerMeasurement
-from fpc_gripper.model import CCMSolver
+from fpc_gripper.model import AdaptiveSolver
+from fpc_gripper.model.pipeline import ModelSettings
 from fpc_gripper.regulators.sim import SimulatedRegulator
 
 PALM_RADIUS = 0.062
@@ -80,7 +81,7 @@ class Loop:
 
 
 def independent_rho(solver, pressures, tip_forces=None):
-    """Tip radius [m] of the raw CCM solver at each pressure [Pa], solved in sequence."""
+    """Tip radius [m] of an independent solver at each pressure [Pa], solved in sequence."""
     out = []
     previous = None
     for k, p in enumerate(pressures):
@@ -103,5 +104,12 @@ def circumdiameter(points):
 
 
 def fresh_solver(design):
-    """Build a new CCMSolver that shares nothing with the code under test."""
-    return CCMSolver(design, n_segments=8, pressure_model='adiabatic')
+    """
+    Build a new solver of the finger the pipeline computes, sharing no state with it.
+
+    The code under test gets its solver from `finger_model` (one cached instance); this
+    is a separate instance with the node's default settings.
+    """
+    settings = ModelSettings()
+    return AdaptiveSolver(design, tolerance=settings.tolerance,
+                          pressure_model=settings.pressure_model)

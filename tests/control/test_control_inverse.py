@@ -1,4 +1,4 @@
-"""Model-inverse feedforward checked against independent solves of the raw CCM solver."""
+"""Model-inverse feedforward checked against independent solves of the finger model."""
 
 from control_sim import fresh_solver, PALM_RADIUS
 import numpy as np
@@ -29,7 +29,7 @@ def rho_of(solver, pressure, tip_force=(0.0, 0.0)):
 
 
 @pytest.mark.parametrize('target, tip_force', [
-    (0.0030, (0.0, 0.0)), (0.020, (0.0, 0.0)), (0.050, (0.0, 0.0)), (0.085, (0.0, 0.0)),
+    (0.0050, (0.0, 0.0)), (0.020, (0.0, 0.0)), (0.050, (0.0, 0.0)), (0.085, (0.0, 0.0)),
     (0.040, (0.0, 0.2)), (0.030, (0.0, -0.1)), (0.060, (0.05, 0.1)),
 ])
 def test_pressure_found_puts_the_tip_at_the_target(model, solver, target, tip_force):

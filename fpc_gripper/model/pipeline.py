@@ -1,0 +1,106 @@
+"""The one finger pipeline: model settings to the solver every consumer of a finger uses."""
+
+from dataclasses import dataclass
+import functools
+import math
+
+import numpy as np
+
+from .design import ActuatorDesign
+from .selection import AdaptiveSolver
+from .solver import CCMSolver, PRESSURE_MODELS
+
+__all__ = ['DEFAULT_TOLERANCE', 'DEFAULT_N_SEGMENTS', 'MAX_SEGMENTS', 'ModelSettings',
+           'finger_model', 'model_label']
+
+#: Default tip-position tolerance against the geometrically exact rod [m].
+DEFAULT_TOLERANCE = 0.5e-3
+#: Segments of the fixed paper CCM that tolerance 0 selects.
+DEFAULT_N_SEGMENTS = 8
+#: Largest fixed N a setting may ask for.
+MAX_SEGMENTS = 64
+
+
+@dataclass(frozen=True)
+class ModelSettings:
+    """
+    How a finger is modelled: the settings `model_node`, replay and the controller share.
+
+    Parameters
+    ----------
+    tolerance : float
+        Tip-position tolerance against the rod [m]; > 0 selects, per scene, the
+        cheapest model that meets it (`AdaptiveSolver`); 0 selects the paper CCM
+        with `n_segments` segments.
+    n_segments : int
+        Segments of the fixed paper CCM (used when `tolerance` is 0), 1 to 64.
+    pressure_model : {'adiabatic', 'isobaric'}
+        Pressure work model.
+
+    """
+
+    tolerance: float = DEFAULT_TOLERANCE
+    n_segments: int = DEFAULT_N_SEGMENTS
+    pressure_model: str = 'adiabatic'
+
+    def __post_init__(self):
+        tolerance = self.tolerance
+        if isinstance(tolerance, bool) or not isinstance(tolerance, (int, float, np.integer,
+                                                                     np.floating)):
+            raise TypeError(f'`tolerance` must be a real number [m], got {tolerance!r}')
+        if not (math.isfinite(tolerance) and tolerance >= 0.0):
+            raise ValueError(f'`tolerance` must be finite and >= 0 [m], got {tolerance}')
+        object.__setattr__(self, 'tolerance', float(tolerance))
+        n = self.n_segments
+        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) \
+                or not 1 <= n <= MAX_SEGMENTS:
+            raise ValueError(f'`n_segments` must be an integer in [1, {MAX_SEGMENTS}], '
+                             f'got {n!r}')
+        object.__setattr__(self, 'n_segments', int(n))
+        if self.pressure_model not in PRESSURE_MODELS:
+            raise ValueError(f'`pressure_model` must be one of {sorted(PRESSURE_MODELS)}, '
+                             f'got {self.pressure_model!r}')
+
+
+@functools.lru_cache(maxsize=32)
+def finger_model(design, settings=ModelSettings()):
+    """
+    Return the solver of a finger: the only way the package builds one for a consumer.
+
+    The node, `fpc-mcap replay-model`, the controller's inverse and the virtual object
+    all call this, so that they compute the same finger. The solver is a pure function
+    of its inputs (warm starts change iteration counts, never answers), so one instance
+    per (design, settings) is shared.
+
+    Parameters
+    ----------
+    design : ActuatorDesign
+    settings : ModelSettings
+
+    Returns
+    -------
+    AdaptiveSolver or CCMSolver
+        `AdaptiveSolver(design, tolerance)` when `settings.tolerance` > 0, else the
+        paper `CCMSolver(design, n_segments)`.
+
+    """
+    if not isinstance(design, ActuatorDesign):
+        raise TypeError(f'`design` must be an ActuatorDesign, got {type(design).__name__}')
+    if not isinstance(settings, ModelSettings):
+        raise TypeError(f'`settings` must be a ModelSettings, got {type(settings).__name__}')
+    if settings.tolerance > 0.0:
+        return AdaptiveSolver(design, tolerance=settings.tolerance,
+                              pressure_model=settings.pressure_model)
+    return CCMSolver(design, n_segments=settings.n_segments,
+                     pressure_model=settings.pressure_model)
+
+
+def model_label(result):
+    """Rung and N of the model behind a result, e.g. 'ccm_aligned N=22' or 'ccm N=8'."""
+    if result is None:
+        return 'none'
+    choice = getattr(result, 'model_choice', None)
+    if choice is not None:
+        return f'{choice.rung} N={choice.n_segments}' if choice.n_segments else choice.rung
+    segments = getattr(getattr(result, 'solver', None), 'n_segments', None)
+    return f'ccm N={segments}' if segments else type(result).__name__
