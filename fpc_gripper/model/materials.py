@@ -1,12 +1,12 @@
 """Lamina stiffnesses and the prestressed-EMC stress polynomial (paper eqs. 6-7, Table III)."""
 
 from dataclasses import dataclass
-import functools
 import math
 
 import numpy as np
 
 __all__ = [
+    'DEFAULT_EMC_COEFFICIENTS',
     'Material',
     'default_emc_coefficients',
     'emc_stress',
@@ -16,10 +16,18 @@ __all__ = [
     'check_emc_monotonic',
 ]
 
-#: Fit window and sample count of the default PEMC law [-], SPEC "Materials".
-_DEFAULT_FIT_STRAINS = np.linspace(0.0, 0.6, 121)
-#: Shear-like modulus of the planar-tension neo-Hookean reference curve, mu = E1/4 [Pa].
-_DEFAULT_MU = 1.5e6 / 4.0
+#: SPEC's default PEMC law (a1, a2, a3, a4) [Pa], about (-1.1052, 2.2207, -1.9992, 1.4856) MPa.
+#: Written out, not refitted at import: a least-squares fit's last digits depend on the
+#: BLAS/LAPACK build, and designs are compared and hashed by value. Recipe (SPEC
+#: "Materials", checked in tests/model/test_materials.py): quartic without constant term,
+#: least squares through the planar-tension neo-Hookean curve sigma = mu ((1 + s) -
+#: (1 + s)^-3), mu = E1/4 = 0.375 MPa, on 121 evenly spaced s in [0, 0.6].
+DEFAULT_EMC_COEFFICIENTS = (
+    -1105183.749342006,
+    2220741.75487717,
+    -1999219.6554144165,
+    1485624.9757942066,
+)
 
 
 @dataclass(frozen=True)
@@ -192,10 +200,13 @@ def fit_emc_polynomial(strain, stress, check_range=None):
     return coefficients
 
 
-@functools.lru_cache(maxsize=None)
 def default_emc_coefficients():
     """
-    Return SPEC's default PEMC law: the quartic fit of a planar-tension neo-Hookean curve.
+    Return SPEC's default PEMC law, `DEFAULT_EMC_COEFFICIENTS`.
+
+    The constants are the quartic fit of a planar-tension neo-Hookean curve (see
+    `DEFAULT_EMC_COEFFICIENTS`), written in the source so that they are the same on
+    every machine.
 
     Returns
     -------
@@ -203,6 +214,4 @@ def default_emc_coefficients():
         (a1, a2, a3, a4) [Pa], about (-1.1052, 2.2207, -1.9992, 1.4856) MPa.
 
     """
-    s = _DEFAULT_FIT_STRAINS
-    sigma = _DEFAULT_MU * ((1.0 + s) - (1.0 + s) ** -3)
-    return fit_emc_polynomial(s, sigma)
+    return DEFAULT_EMC_COEFFICIENTS

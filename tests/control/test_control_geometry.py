@@ -45,6 +45,7 @@ def test_general_aperture_is_the_circumscribed_circle(rhos, offset):
 
 
 def test_degenerate_and_other_finger_counts():
+    # Exact: collinear points return the sentinel math.inf itself.
     assert aperture_from_points([[0.01, 0.0], [0.0, 0.0], [-0.01, 0.0]]) == math.inf
     assert aperture_from_points([[0.03, 0.0], [-0.02, 0.0]]) == pytest.approx(0.05)
     assert aperture_from_points([[0.0, -0.02]]) == pytest.approx(0.04)

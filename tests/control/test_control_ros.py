@@ -272,6 +272,7 @@ def test_lost_pressure_feedback_holds_when_asked(rig):
     r.spin_for(0.3)
     assert r.states[-1].level == DiagnosticStatus.ERROR
     after = r.commands[FINGERS[0]][count:]
+    # Exact: 'hold' republishes the stored command, the same double every time.
     assert len(after) > 5 and all(m.fluid_pressure == held for m in after)
     assert ATM + 100.0e3 < held <= ATM + CONFIG.max_pressure     # held, not vented
 
@@ -314,6 +315,7 @@ def test_parameters_are_validated(ros):
         ]
         for param, ok in checks:
             assert node.set_parameters([param])[0].successful is ok, param.name
+        # Exact here and below: parameter values passed through unchanged.
         assert node.law.config.slew_rate_pa_s == 2.0e5
         assert node.law.max_pressure == 300.0e3
         descriptor = node.describe_parameter('max_pressure')

@@ -41,7 +41,8 @@ def test_demo_session_passes_and_records(tmp_path):
         assert len(commands) > 100
         assert max(m.fluid_pressure for m in commands) <= ATM + limit
         forces = [m.wrench.force.z for m in topics[f'/finger_{i}/tip_force']]
-        assert max(forces) > 0.4 and min(forces) == 0.0     # grasped, and released
+        # Grasped, and released: out of contact the cylinder returns 0.0 itself (exact).
+        assert max(forces) > 0.4 and min(forces) == 0.0
     states = [m for m in topics['/controller_state']]
     assert {kv.value for m in states for kv in m.values if kv.key == 'goal_status'} \
         >= {'active', 'reached'}

@@ -120,7 +120,12 @@ def _as_list(value):
 
 
 def assert_same_fields(expected, actual, where='msg'):
-    """Compare a generated rclpy message with a decoded mcap_ros2 message, field by field."""
+    """
+    Compare a generated rclpy message with a decoded mcap_ros2 message, field by field.
+
+    Exact equality is right: CDR stores every number verbatim, and the samples' float32
+    fields (colours) hold values exact in float32.
+    """
     fields = expected.get_fields_and_field_types()
     assert fields, where
     for name, field_type in fields.items():

@@ -2,6 +2,7 @@
 
 import math
 
+from helpers import assert_designs_close
 import pytest
 
 from fpc_gripper.io.config import default_gripper_config_path, load_gripper_config
@@ -11,9 +12,12 @@ from fpc_gripper.model import ActuatorDesign
 def test_shipped_gripper_has_three_fingers_at_prestrain_025():
     cfg = load_gripper_config()
     assert cfg.names == ('finger_0', 'finger_1', 'finger_2')
-    assert all(f.design == ActuatorDesign.paper(prestrain=0.25) for f in cfg.fingers)
+    for finger in cfg.fingers:
+        assert_designs_close(finger.design, ActuatorDesign.paper(prestrain=0.25),
+                             where=finger.name)
     angles = [f.mount_angle for f in cfg.fingers]
     assert angles[1] - angles[0] == pytest.approx(2 * math.pi / 3)
+    # Exact: read verbatim from gripper_paper.yaml, not computed.
     assert cfg.max_pressure == 400e3 and cfg.atmospheric_pressure == 101325.0
     assert default_gripper_config_path().name == 'gripper_paper.yaml'
 
@@ -46,5 +50,6 @@ def test_inline_actuator_and_overrides(tmp_path):
     cfg = load_gripper_config(write(tmp_path, (
         'actuator: {prestrain: 0.3, Cy: 0.027}\n'
         'fingers: [{name: a, design: {prestrain: 0.15}}, {name: b}]\n')))
+    # Exact: the overrides are read verbatim from the YAML text above.
     assert cfg.fingers[0].design.prestrain == 0.15 and cfg.fingers[0].design.Cy == 0.027
     assert cfg.fingers[1].design.prestrain == 0.3

@@ -80,11 +80,13 @@ def test_export_csv_flattens_fields(capsys, recording, tmp_path):
     with open(out_dir / 'finger_0__pressure.csv', newline='') as handle:
         rows = list(csv.DictReader(handle))
     assert len(rows) == 40
+    # Exact: the CSV holds repr(float), which parses back to the same double.
     assert float(rows[3]['fluid_pressure']) == samples(3)['finger_0/pressure'].fluid_pressure
     assert int(rows[3]['log_time_ns']) == BASE + 3 * 50_000_000 + 1
     assert rows[3]['header.frame_id'] == 'finger_0'
     with open(out_dir / 'finger_1__shape.csv', newline='') as handle:
         poses = json.loads(next(csv.DictReader(handle))['poses'])
+    # Exact: the first pose has tangent 0, so w = cos(0) = 1.0 in every libm.
     assert len(poses) == 17 and poses[0]['pose']['orientation']['w'] == 1.0
 
 

@@ -31,6 +31,7 @@ def test_shape_poses_follow_the_midplane_and_its_tangent(kappa):
     assert len(path.poses) == len(result.points)
     for pose, (x, z), phi in zip(path.poses, result.points, result.tangent):
         p, q = pose.pose.position, pose.pose.orientation
+        # Exact: the points are copied into the poses unchanged; y, q.x, q.z are never set.
         assert (p.x, p.y, p.z) == (x, 0.0, z)
         assert pose.header == path.header
         # The pose's +X axis is the tangent (cos phi, 0, sin phi): a rotation about Y only.
@@ -50,6 +51,8 @@ def test_serialized_shape_decodes_to_the_path(frame_id, n):
     result = FakeResult(7.0, n=n)
     data = serialized_shape(result, frame_id, 98_765_432_123_456_789)
     reference = shape_message(result, frame_id, 98_765_432_123_456_789)
+    # Exact: both encode the same doubles (one numpy sin/cos of the same half angles), and
+    # CDR stores float64 verbatim.
     assert deserialize_message(data, Path) == reference
     assert len(data) == len(serialize_message(reference))
     decode = generate_dynamic('nav_msgs/msg/Path', message_definition('nav_msgs/msg/Path'))
@@ -59,6 +62,7 @@ def test_serialized_shape_decodes_to_the_path(frame_id, n):
 
 def test_rigidity_and_marker():
     msg = rigidity_message(1.5e-3, None, 'finger_2', 5)
+    # Exact here and below: values passed through unchanged or set to 0.0 explicitly.
     assert (msg.vector.x, msg.vector.y) == (1.5e-3, 0.0) and math.isnan(msg.vector.z)
     assert msg.header.stamp == ns_to_time(5)
     marker = shape_marker(FakeResult(10.0), 'finger_2', 5, 2, color=(1.0, 0.5, 0.0, 1.0))

@@ -134,6 +134,7 @@ def test_signals_close_with_summary_and_index(talker, tmp_path, sig):
     assert header.profile == 'ros2'
     assert summary.chunk_indexes and {c.compression for c in summary.chunk_indexes} == {'lz4'}
     assert all(c.message_index_offsets for c in summary.chunk_indexes)
+    # Exact: the published values (-1.0 and float(i)) come back verbatim through CDR.
     got = [m.data for _, _, _, _, m in read_independently(output)]
     warm_up = got.count(-1.0)
     assert got[warm_up:] == [float(i) for i in sorted(times)]

@@ -61,6 +61,7 @@ def test_load_hessian_couples_every_earlier_rotation():
     solver = CCMSolver(design, n_segments=5)
     q = np.random.default_rng(1).normal(scale=0.1, size=(5, 4))
     _, grad, hess = load_derivatives(q, solver.segments.lengths, [(2, np.array([0.5, 0.5]))])
+    # Exact: structural zeros, entries the load never writes into the zero-filled arrays.
     assert np.all(grad[2:] == 0.0)
     assert np.all(hess[8:, :] == 0.0) and np.all(hess[:, 8:] == 0.0)
     assert np.any(hess[:4, 4:8] != 0.0)

@@ -64,7 +64,7 @@ def test_station_layout_resolves_ribs_and_channel_end():
     design = ActuatorDesign.paper()
     breaks, types, law = station_layout(design, 'exact')
     ribs = design.transverse_ribs()
-    assert breaks[0] == 0.0 and np.isclose(breaks[-1], design.free_length)
+    assert breaks[0] == 0.0 and np.isclose(breaks[-1], design.free_length)   # 0.0 is set
     assert np.isclose(breaks[-2], design.channel_end) and types[-1] == law.n_types - 1
     covered = np.diff(breaks)[types == 1].sum()
     np.testing.assert_allclose(covered, np.sum(ribs[:, 1] - ribs[:, 0]))

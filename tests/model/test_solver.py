@@ -34,7 +34,14 @@ def test_no_hidden_state(solver):
     first = solver.solve(80e3)
     solver.solve(300e3, tip_force=(0.5, 0.5))
     again = solver.solve(80e3)
-    np.testing.assert_array_equal(first.coefficients, again.coefficients)
+    # A hidden warm start (from the 300 kPa state, or from 79 kPa) moves the converged
+    # coefficients by only ~6e-15 relative, too little to tell from round-off, but it
+    # changes the Newton iteration count (5 cold, 6 and 3 warm): an integer, exact.
+    # The coefficients then agree to round-off, which is not bitwise on BLAS builds that
+    # are not reproducible between calls (e.g. MKL without CNR).
+    assert again.iterations == first.iterations
+    np.testing.assert_allclose(again.coefficients, first.coefficients, rtol=1e-12,
+                               atol=1e-12 * np.abs(first.coefficients).max())
 
 
 def test_isobaric_is_adiabatic_at_scaled_pressure():

@@ -163,7 +163,7 @@ def test_choose_model_prefers_cheap_models_for_easy_scenes():
     hard = choose_model(Scene(ActuatorDesign.paper(0.40), 0.0, (0.0, -1.0)), 2e-3)
     rank = {m['rung'] + str(m['n_segments']): m['time'] for m in model['models']}
     assert easy.cost < hard.cost, (easy, hard)
-    assert rank[easy.rung + str(easy.n_segments)] == easy.cost
+    assert rank[easy.rung + str(easy.n_segments)] == easy.cost   # the JSON value, passed on
     outside = choose_model(Scene(ActuatorDesign.paper(0.60), 0.0), 1e-3)
     assert outside.rung == 'rod' and 'outside' in outside.reason
     with pytest.raises(ValueError, match='tolerance'):

@@ -52,7 +52,7 @@ def assert_shape_is(path, result, frame):
                       p.pose.orientation.w] for p in path.poses])
     assert xyz.shape == (result.points.shape[0], 3)
     assert_allclose(xyz[:, [0, 2]], result.points, rtol=0, atol=1e-9)
-    assert np.all(xyz[:, 1] == 0.0)
+    assert np.all(xyz[:, 1] == 0.0)          # exact: y is never set, it stays 0.0
     # +X of each pose along the tangent: a rotation of -tangent about +Y.
     half = -0.5 * result.tangent
     expected = np.column_stack([0 * half, np.sin(half), 0 * half, np.cos(half)])
@@ -210,6 +210,7 @@ def test_serialized_shape_decodes_to_shape_message():
         for frame in ('finger_0', 'f', 'abc', ''):
             for stamp in (0, 1_795_000_000_123_456_789):
                 data = serialized_shape(result, frame, stamp)
+                # Exact: both encode the same doubles, and CDR stores float64 verbatim.
                 assert deserialize_message(data, Path) == shape_message(result, frame, stamp)
 
 
@@ -247,7 +248,7 @@ def adaptive(ros):
 @pytest.mark.ros
 def test_default_tolerance_uses_the_model_the_scene_needs(adaptive):
     node, probe = adaptive
-    assert node.get_parameter('tolerance').value == 0.5e-3
+    assert node.get_parameter('tolerance').value == 0.5e-3     # the default, verbatim
     reference = AdaptiveSolver(DESIGN, tolerance=0.5e-3)
     stamp = probe.send_pressure('finger_0', ATM + 150e3)
     expected = reference.solve(150e3)
@@ -326,7 +327,7 @@ def test_bad_input_is_rejected_and_the_state_kept(model, kind, value, text):
         finger, lambda s: s.level == DiagnosticStatus.WARN and text in values(s)['last_rejection'],
         since)
     assert text in status.message
-    assert values(status)['pressure_pa'] == '80000.0'
+    assert values(status)['pressure_pa'] == '80000.0'    # formatted to 0.1 Pa
     time.sleep(0.2)
     assert len(probe.shapes[finger]) == count
     assert state.result is kept and not state.pending
@@ -356,7 +357,7 @@ def test_bad_parameters_are_refused_with_a_reason(model, name, value, reason):
     (result,) = node.set_parameters([Parameter(name, value=value)])
     assert not result.successful
     assert reason in result.reason
-    assert node.get_parameter(name).value == before
+    assert node.get_parameter(name).value == before    # unchanged, not recomputed: exact
 
 
 @pytest.mark.ros
@@ -383,7 +384,7 @@ def test_parameter_changes_rebuild_the_solvers(model):
         assert all(r.successful for r in node.set_parameters([
             Parameter('n_segments', value=8), Parameter('pressure_model', value='adiabatic')]))
     (result,) = node.set_parameters([Parameter('max_rate_hz', value=500.0)])
-    assert result.successful and node.core.max_rate_hz == 500.0
+    assert result.successful and node.core.max_rate_hz == 500.0    # passed through: exact
     (result,) = node.set_parameters([Parameter('atmospheric_pressure', value=100e3)])
     try:
         stamp = probe.send_pressure('finger_0', 100e3 + 60e3)

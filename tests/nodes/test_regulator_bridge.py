@@ -145,6 +145,7 @@ def test_step_follows_the_exact_first_order_response(rig):
     first = samples[rising[0]]
     assert first.header.frame_id == FINGERS[0]
     assert math.isclose(first.variance, lsb ** 2 / 12, rel_tol=1e-9)
+    # Exact: an idle channel stays at 0.0 (no noise, no command), quantised to 0.0.
     for name in FINGERS[1:]:
         assert all(m.fluid_pressure == ATM for m in r.pressure[name])
 
@@ -158,7 +159,10 @@ def test_command_above_the_limit_is_clamped(rig):
     r.spin_until(lambda: r.last_status(name) is not None
                  and values(r.last_status(name))['clamped'] == 'True')
     r.spin_for(0.3)
-    assert sim.setpoint(1) == limit                    # reached the limit, not beyond
+    # Reached the limit (the last rate-limited step lands on it to round-off), and not
+    # beyond: the setpoint is clamped with min(), so `<= limit` is exact.
+    assert sim.setpoint(1) == pytest.approx(limit, rel=0, abs=1e-6)
+    assert sim.setpoint(1) <= limit
     assert max(float(values(s)['setpoint_pa_gauge'])
                for _, ss in r.diagnostics for s in ss if s.name.endswith(name)) <= limit
     status = r.last_status(name)
@@ -174,7 +178,7 @@ def test_invalid_commands_are_rejected(rig):
         r.command(FINGERS[0], bad)
     r.spin_for(0.2)
     assert r.bridge.supervisors[0].mode.name == 'IDLE'
-    assert r.bridge.backend.setpoint(0) == 0.0
+    assert r.bridge.backend.setpoint(0) == 0.0          # the idle setpoint, 0.0: exact
 
 
 @pytest.mark.parametrize('safe_state', ['vent', 'hold'])
@@ -204,20 +208,21 @@ def test_backend_fault_gives_error_diagnostics_and_the_safe_state(rig):
     r = rig(rate_limit_pa_s=1.0e7, command_timeout_s=5.0, diagnostics_rate_hz=20.0)
     sim = r.bridge.backend
     r.command(FINGERS[0], ATM + 2.0e5)
-    r.spin_until(lambda: sim.setpoint(0) == 2.0e5)
+    # The setpoint ramps there through the rate limit: to round-off, not bitwise.
+    r.spin_until(lambda: sim.setpoint(0) == pytest.approx(2.0e5, rel=0, abs=1e-6))
     sim.inject_fault('disconnect')
     r.spin_until(lambda: all(r.last_status(n).level == DiagnosticStatus.ERROR for n in FINGERS))
     for name in FINGERS:
         status = r.last_status(name)
         assert 'backend fault' in status.message and values(status)['mode'] == 'fault'
-        assert float(values(status)['setpoint_pa_gauge']) == 0.0
+        assert float(values(status)['setpoint_pa_gauge']) == 0.0    # vented to 0.0: exact
     assert all(sup.mode in SAFE_MODES for sup in r.bridge.supervisors)
     sim.clear_faults()
     r.spin_until(lambda: r.last_status(FINGERS[0]).level == DiagnosticStatus.WARN)
     assert sim.setpoint(0) == 0.0                      # vented, and stays so until commanded
     r.command(FINGERS[0], ATM + 1.0e5)
     r.spin_until(lambda: r.last_status(FINGERS[0]).level == DiagnosticStatus.OK)
-    r.spin_until(lambda: sim.setpoint(0) == 1.0e5)
+    r.spin_until(lambda: sim.setpoint(0) == pytest.approx(1.0e5, rel=0, abs=1e-6))
 
 
 def test_out_of_range_parameters_are_refused_with_a_reason(rig):
@@ -243,6 +248,7 @@ def test_out_of_range_parameters_are_refused_with_a_reason(rig):
     assert not result.successful and "['hold', 'vent']" in result.reason
     result = set_remote('backend', 'modbus')
     assert not result.successful and 'cleanup' in result.reason
+    # Exact here and below: parameter values passed through unchanged.
     assert r.bridge.get_parameter('max_pressure').value == 4.0e5
     result = set_remote('max_pressure', 3.0e5)
     assert result.successful
@@ -260,10 +266,11 @@ def test_lifecycle_deactivate_vents_and_cleanup_closes(ros):
         sim = bridge.backend
         bridge.supervisors[0].command(1.0e5, bridge.get_clock().now().nanoseconds * 1e-9)
         deadline = time.monotonic() + 10.0
-        while sim.setpoint(0) != 1.0e5:
+        while sim.setpoint(0) != pytest.approx(1.0e5, rel=0, abs=1e-6):
             assert time.monotonic() < deadline
             executor.spin_once(timeout_sec=0.01)
         bridge.trigger_deactivate()
+        # Exact: deactivating vents to the setpoint 0.0.
         assert bridge.lifecycle_state == 'inactive' and sim.setpoint(0) == 0.0
         bridge.trigger_cleanup()
         assert bridge.lifecycle_state == 'unconfigured' and bridge.backend is None

@@ -21,6 +21,9 @@ def run(supervisor, start, stop, dt):
 
 
 def test_default_limit_is_400_kpa_and_commands_are_clamped():
+    # Exact comparisons in this test and the ones below with rate_limit_pa_s=inf: clamps
+    # return the bound itself, vent and idle set 0.0, and an unlimited step from 0 (or to
+    # 0) computes 0 + t (or t + (0 - t)), which IEEE arithmetic gives exactly.
     sup = ChannelSupervisor(rate_limit_pa_s=math.inf, command_timeout_s=10.0)
     assert sup.max_pressure == DEFAULT_MAX_PRESSURE == 4.0e5
     sup.update(0.0)

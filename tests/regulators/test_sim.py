@@ -51,6 +51,7 @@ def test_step_is_exact_first_order_for_any_clock_granularity(tau):
         expected = target * (1.0 - math.exp(-t / tau))
         assert_allclose(sims[0].true_pressure(1), expected, rtol=1e-12)
         assert_allclose(sims[1].true_pressure(1), expected, rtol=1e-9)
+    # Exact: a channel never commanded stays at its initial 0.0.
     assert sims[0].true_pressure(0) == 0.0
     assert sims[0].true_pressure(2) == 0.0
 
@@ -108,8 +109,8 @@ def test_output_saturates_to_supply_and_to_zero():
     sim.set_pressure(1, -4.0e4)
     clock.now += 20.0
     assert_allclose(sim.true_pressure(0), 5.0e5, rtol=1e-9)
-    assert sim.true_pressure(1) == 0.0
-    assert sim.setpoint(0) == 2.0e6
+    assert sim.true_pressure(1) == 0.0       # target saturated to 0.0, never left: exact
+    assert sim.setpoint(0) == 2.0e6          # stored as given: exact
 
 
 def _reference(y0, duration, target, leak, tau, slew, band):
@@ -168,7 +169,7 @@ def test_leak_cannot_pull_the_output_below_atmosphere():
     clock.now += 0.2
     assert 0.0 < sim.true_pressure(0) < 1.0e5
     clock.now += 10.0
-    assert sim.true_pressure(0) == 0.0
+    assert sim.true_pressure(0) == 0.0       # stops on the breakpoint 0.0 itself: exact
 
 
 def test_stuck_sensor_freezes_the_readback_only():
@@ -180,7 +181,7 @@ def test_stuck_sensor_freezes_the_readback_only():
     sim.inject_fault('stuck_sensor', 0)
     sim.set_pressure(0, 0.0)
     clock.now += 1.0
-    assert sim.read_pressure(0)[0] == frozen
+    assert sim.read_pressure(0)[0] == frozen      # the stored reading, returned: exact
     assert sim.true_pressure(0) < 0.01 * frozen
     sim.clear_faults()
     assert sim.read_pressure(0)[0] != frozen
@@ -210,6 +211,8 @@ def test_noise_is_seeded_and_has_the_configured_spread():
         sim.set_pressure(0, 3.0e5)
         clock.now += 10.0
         readings.append(np.array([sim.read_pressure(0)[0] for _ in range(2000)]))
+    # Exact: the same seed replays the same generator in this process, and the readings
+    # are quantised; no tolerance could tell a reseeded generator from a drifting one.
     assert np.array_equal(readings[0], readings[1])
     assert not np.array_equal(readings[0], readings[2])
     lsb = 1.0e6 / 4095
@@ -225,7 +228,7 @@ def test_clock_stepping_back_does_not_move_the_model():
     clock.now += 0.1
     value = sim.true_pressure(0)
     clock.now -= 0.05
-    assert sim.true_pressure(0) == value
+    assert sim.true_pressure(0) == value     # not advanced, so not recomputed: exact
 
 
 def test_calls_before_connect_raise_backend_fault():

@@ -1,0 +1,55 @@
+"""Helpers shared by the test directories: tolerant, field-by-field ActuatorDesign comparison."""
+
+import dataclasses
+import enum
+import math
+import numbers
+
+#: Default relative tolerance of `assert_designs_close`. Design fields are inputs or
+#: shipped literals; the only field ever seen to differ between machines was a fitted
+#: PEMC coefficient, by 1.5e-14 relative (BLAS round-off). 1e-12 leaves a margin of 100
+#: over that while a real change of a design (even a YAML value rounded to 10 digits)
+#: still fails.
+DESIGN_RTOL = 1e-12
+
+
+def assert_designs_close(actual, expected, rtol=DESIGN_RTOL, atol=0.0, where='design'):
+    """
+    Assert that two ActuatorDesigns (or any frozen dataclasses) are the same design.
+
+    Real numbers compare to `rtol` (and `atol`; rtol = atol = 0 demands exact
+    equality); nested dataclasses (the Material laminae) and tuples (the PEMC
+    coefficients) compare element by element; bools, strings, enums and None compare
+    exactly, and a bool never equals a number. The message names the first field that
+    differs, e.g. ``design.fluidic_layer.nu``.
+    """
+    assert dataclasses.is_dataclass(expected) and not isinstance(expected, type), where
+    _assert_close(actual, expected, float(rtol), float(atol), where)
+
+
+def _assert_close(actual, expected, rtol, atol, where):
+    if dataclasses.is_dataclass(expected) and not isinstance(expected, type):
+        assert type(actual) is type(expected), \
+            f'{where}: {type(actual).__name__} is not {type(expected).__name__}'
+        for field in dataclasses.fields(expected):
+            _assert_close(getattr(actual, field.name), getattr(expected, field.name), rtol,
+                          atol, f'{where}.{field.name}')
+    elif isinstance(expected, (tuple, list)):
+        assert isinstance(actual, (tuple, list)) and len(actual) == len(expected), \
+            f'{where}: {actual!r} does not match {expected!r}'
+        for i, (a, e) in enumerate(zip(actual, expected)):
+            _assert_close(a, e, rtol, atol, f'{where}[{i}]')
+    elif isinstance(expected, (bool, str, enum.Enum)) or expected is None:
+        assert type(actual) is type(expected) and actual == expected, \
+            f'{where}: {actual!r} != {expected!r}'
+    elif isinstance(expected, numbers.Real):
+        assert isinstance(actual, numbers.Real) and not isinstance(actual, bool), \
+            f'{where}: {actual!r} is not a number'
+        if rtol == 0.0 and atol == 0.0:
+            close = actual == expected
+        else:
+            close = math.isclose(actual, expected, rel_tol=rtol, abs_tol=atol)
+        assert close, (f'{where}: {actual!r} != {expected!r} '
+                       f'(rtol {rtol:g}, atol {atol:g})')
+    else:
+        assert actual == expected, f'{where}: {actual!r} != {expected!r}'
