@@ -82,7 +82,7 @@ def models():
 
 
 def unknowns(result):
-    """Number of unknowns of the discretisation behind a result."""
+    """Return the number of unknowns of the discretisation behind a result."""
     if hasattr(result, 'q'):
         return int(result.q.size)
     state = result.state
@@ -93,7 +93,7 @@ def unknowns(result):
 
 def static_cost(rows):
     """
-    Static cost of every model: unknowns x median Newton iterations of its cold solves.
+    Return the static cost of every model: unknowns x median cold Newton iterations.
 
     Both factors are properties of the discretisation and its solver, the same on every
     machine and in every run, so the model choice never depends on a measured time.

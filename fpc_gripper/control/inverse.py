@@ -226,7 +226,7 @@ class InverseModel:
         return float(self.grid_rho[0]), float(self.grid_rho[-1])
 
     def _initial(self, pressure):
-        """The grid state nearest in pressure: a warm start that depends on `pressure` only."""
+        """Return the grid state nearest in pressure: a warm start set by `pressure` alone."""
         index = int(np.argmin(np.abs(self.grid_pressure - pressure)))
         return self._grid_results[index]
 
@@ -342,9 +342,9 @@ class InverseModel:
         The reference is the measured state rounded to a grid of `pressure_window` [Pa]
         and `force_window` [N] (clipped to [0, max_pressure]; a non-zero load component
         never rounds to 0, since an unloaded finger may be modelled more coarsely), so
-        the answer is a function of the arguments alone; linearisations are cached per reference. The
-        error is second order, below 2e-5 m for the default windows on the paper's
-        finger.
+        the answer is a function of the arguments alone; linearisations are cached per
+        reference. The error is second order, below 2e-5 m for the default windows on
+        the paper's finger.
 
         Returns
         -------

@@ -325,7 +325,8 @@ def _static_cost(entry):
 
 def _choose(model, cell, tolerance):
     """Return the cheapest model whose measured bound in `cell` meets `tolerance`."""
-    rod_cost = next((m['cost'] for m in model['models'] if m['rung'] == 'rod'), float('nan'))
+    rod_cost = next((_static_cost(m)[0] for m in model['models'] if m['rung'] == 'rod'),
+                    float('nan'))
     if isinstance(cell[0], str):
         return ModelChoice('rod', 0, 0.0, 'outside the measured envelope ('
                            + ', '.join(cell) + '): geometrically exact rod', rod_cost)

@@ -161,9 +161,12 @@ def test_choose_model_prefers_cheap_models_for_easy_scenes():
     model = load_error_model()
     easy = choose_model(Scene(ActuatorDesign.paper(0.15), 200e3), 2e-3)
     hard = choose_model(Scene(ActuatorDesign.paper(0.40), 0.0, (0.0, -1.0)), 2e-3)
-    rank = {m['rung'] + str(m['n_segments']): m['time'] for m in model['models']}
+    rank = {m['rung'] + str(m['n_segments']): m['cost'] for m in model['models']}
     assert easy.cost < hard.cost, (easy, hard)
     assert rank[easy.rung + str(easy.n_segments)] == easy.cost   # the JSON value, passed on
+    for m in model['models']:
+        # The static cost is a property of the discretisation: unknowns x iterations.
+        assert m['cost'] == pytest.approx(m['unknowns'] * m['iterations'], rel=1e-12)
     outside = choose_model(Scene(ActuatorDesign.paper(0.60), 0.0), 1e-3)
     assert outside.rung == 'rod' and 'outside' in outside.reason
     with pytest.raises(ValueError, match='tolerance'):
@@ -186,3 +189,26 @@ def test_choose_model_bound_holds(prestrain, pressure, force, tolerance):
                                       choice.n_segments)
         assert np.isfinite(estimate)
     assert make_solver('rod', 0, design).solve(pressure, force).success
+
+
+def test_choose_model_never_reads_a_measured_time():
+    """Scrambling the stored timings changes no choice; without static costs it refuses."""
+    import copy
+    import random
+    model = load_error_model()
+    scrambled = copy.deepcopy(model)
+    times = [m['time'] for m in scrambled['models']]
+    random.Random(7).shuffle(times)
+    for m, t in zip(scrambled['models'], times):
+        m['time'] = t * 1e3
+    scenes = [Scene(ActuatorDesign.paper(e), p, f) for e in (0.15, 0.25, 0.40)
+              for p in (0.0, 150e3, 390e3) for f in ((0.0, 0.0), (0.0, 0.4), (-0.8, 0.0))]
+    for scene in scenes:
+        for tolerance in (5e-5, 5e-4, 3e-3):
+            assert choose_model(scene, tolerance, model) == \
+                choose_model(scene, tolerance, scrambled), (scene, tolerance)
+    stripped = copy.deepcopy(model)
+    for m in stripped['models']:
+        del m['cost']
+    with pytest.raises(ValueError, match='static costs'):
+        choose_model(scenes[1], 5e-4, stripped)
