@@ -8,5 +8,19 @@ fi
 if [ ! -x .venv/bin/python ]; then
   python3 -m venv .venv
 fi
-.venv/bin/pip install -q --disable-pip-version-check -r requirements.txt
-.venv/bin/pip install -q --disable-pip-version-check --no-deps -e .
+pip=(.venv/bin/pip --disable-pip-version-check)
+# Exactly requirements.lock: whatever .venv holds beyond it goes, the pins are installed as
+# they are (--no-deps: nothing unpinned can come in), and pip check proves they are complete.
+names() { sed -e '/^#/d' -e 's/==.*//' | LC_ALL=C sort; }
+extra="$(LC_ALL=C comm -23 <(.venv/bin/python scripts/freeze.py | names) \
+  <(names <requirements.lock))"
+if [ -n "$extra" ]; then
+  echo "setup.sh: removing from .venv what requirements.lock does not pin:" $extra
+  "${pip[@]}" uninstall -q -y $extra
+fi
+"${pip[@]}" install -q --no-deps -r requirements.lock
+"${pip[@]}" install -q --no-deps --use-pep517 --no-build-isolation -e .
+if ! check="$("${pip[@]}" check)"; then
+  echo "$check" >&2
+  exit 1
+fi
