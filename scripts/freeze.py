@@ -1,4 +1,5 @@
-"""Print `name==version` for every distribution pip installed here, sorted by name.
+"""
+Print `name==version` for every distribution pip installed here, sorted by name.
 
 Run it with the interpreter of the environment to list (`.venv/bin/python
 scripts/freeze.py`). Names are normalised as PEP 503 does (lower case, `-`). Left out:
