@@ -8,6 +8,14 @@ fi
 if [ ! -x .venv/bin/python ]; then
   python3 -m venv .venv
 fi
+# The lock holds one Python's wheels (its header says which); another Python needs its own lock.
+locked="$(sed -n 's/^# Python \([0-9]*\.[0-9]*\).*/\1/p' requirements.lock)"
+python="$(.venv/bin/python -c 'import sys; print("%d.%d" % sys.version_info[:2])')"
+if [ "$locked" != "$python" ]; then
+  echo "setup.sh: requirements.lock is for Python $locked, .venv has $python:" \
+    'run scripts/lock.sh with this Python (or remove .venv)' >&2
+  exit 1
+fi
 pip=(.venv/bin/pip --disable-pip-version-check)
 # Exactly requirements.lock: whatever .venv holds beyond it goes, the pins are installed as
 # they are (--no-deps: nothing unpinned can come in), and pip check proves they are complete.

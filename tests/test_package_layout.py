@@ -44,6 +44,8 @@ def _requirement_lines(path):
 
 def test_requirements_lock_pins_every_requirement_exactly_once():
     """Each lock line is `name==version`, no name twice; each requirements.in name is pinned."""
+    # scripts/setup.sh refuses a .venv of another Python than the header's.
+    assert re.search(r'^# Python 3\.\d+\.\d+ on ', (ROOT / 'requirements.lock').read_text(), re.M)
     pins = _requirement_lines(ROOT / 'requirements.lock')
     assert pins
     malformed = [line for line in pins if not _PIN.fullmatch(line)]
