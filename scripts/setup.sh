@@ -8,5 +8,27 @@ fi
 if [ ! -x .venv/bin/python ]; then
   python3 -m venv .venv
 fi
-.venv/bin/pip install -q --disable-pip-version-check -r requirements.txt
-.venv/bin/pip install -q --disable-pip-version-check --no-deps -e .
+# The lock holds one Python's wheels (its header says which); another Python needs its own lock.
+locked="$(sed -n 's/^# Python \([0-9]*\.[0-9]*\).*/\1/p' requirements.lock)"
+python="$(.venv/bin/python -c 'import sys; print("%d.%d" % sys.version_info[:2])')"
+if [ "$locked" != "$python" ]; then
+  echo "setup.sh: requirements.lock is for Python $locked, .venv has $python:" \
+    'run scripts/lock.sh with this Python (or remove .venv)' >&2
+  exit 1
+fi
+pip=(.venv/bin/pip --disable-pip-version-check)
+# Exactly requirements.lock: whatever .venv holds beyond it goes, the pins are installed as
+# they are (--no-deps: nothing unpinned can come in), and pip check proves they are complete.
+names() { sed -e '/^#/d' -e 's/==.*//' | LC_ALL=C sort; }
+extra="$(LC_ALL=C comm -23 <(.venv/bin/python scripts/freeze.py | names) \
+  <(names <requirements.lock))"
+if [ -n "$extra" ]; then
+  echo "setup.sh: removing from .venv what requirements.lock does not pin:" $extra
+  "${pip[@]}" uninstall -q -y $extra
+fi
+"${pip[@]}" install -q --no-deps -r requirements.lock
+"${pip[@]}" install -q --no-deps --use-pep517 --no-build-isolation -e .
+if ! check="$("${pip[@]}" check)"; then
+  echo "$check" >&2
+  exit 1
+fi

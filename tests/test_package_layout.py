@@ -28,6 +28,37 @@ def _console_scripts():
     return re.findall(r"'([\w-]+) = fpc_gripper[\w.]*:main'", text)
 
 
+# A requirement's name (PEP 508) at the start of a requirements.in line; a lock line exactly.
+_NAME = re.compile(r'[A-Za-z0-9](?:[A-Za-z0-9._-]*[A-Za-z0-9])?')
+_PIN = re.compile(rf'({_NAME.pattern})==([0-9][0-9A-Za-z.+!-]*)')
+
+
+def _canonical(name):
+    return re.sub(r'[-_.]+', '-', name).lower()
+
+
+def _requirement_lines(path):
+    lines = (line.split('#', 1)[0].strip() for line in path.read_text().splitlines())
+    return [line for line in lines if line]
+
+
+def test_requirements_lock_pins_every_requirement_exactly_once():
+    """Each lock line is `name==version`, no name twice; each requirements.in name is pinned."""
+    # scripts/setup.sh refuses a .venv of another Python than the header's.
+    assert re.search(r'^# Python 3\.\d+\.\d+ on ', (ROOT / 'requirements.lock').read_text(), re.M)
+    pins = _requirement_lines(ROOT / 'requirements.lock')
+    assert pins
+    malformed = [line for line in pins if not _PIN.fullmatch(line)]
+    assert not malformed, malformed
+    names = [_canonical(_PIN.fullmatch(line).group(1)) for line in pins]
+    assert sorted({name for name in names if names.count(name) > 1}) == []
+    wanted = [_NAME.match(line) for line in _requirement_lines(ROOT / 'requirements.in')]
+    assert all(wanted), 'a requirements.in line that does not start with a name'
+    wanted = {_canonical(match.group()) for match in wanted}
+    assert {'ros-jazzy-rclpy', 'numpy', 'hypothesis'} <= wanted
+    assert sorted(wanted - set(names)) == []
+
+
 @pytest.fixture(scope='module')
 def prefix(tmp_path_factory):
     """Copy the repository (without .venv) and build it with colcon; return the prefix."""
