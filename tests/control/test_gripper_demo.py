@@ -7,8 +7,10 @@ import sys
 
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
+import numpy as np
 import pytest
 
+from fpc_gripper.io.cli import replay_model
 from fpc_gripper.io.config import load_gripper_config
 from fpc_gripper.nodes.gripper_demo import _path_tip_z
 
@@ -46,6 +48,37 @@ def test_demo_session_passes_and_records(tmp_path):
     states = [m for m in topics['/controller_state']]
     assert {kv.value for m in states for kv in m.values if kv.key == 'goal_status'} \
         >= {'active', 'reached'}
+    assert_replay_reproduces_the_published_shapes(tmp_path)
+
+
+def shapes_by_stamp(path):
+    """{(topic, header stamp [ns]): (M, 2) midplane X, Z [m]} of every shape message."""
+    out = {}
+    with open(path, 'rb') as stream:
+        reader = make_reader(stream, decoder_factories=[DecoderFactory()])
+        for _, channel, _, msg in reader.iter_decoded_messages():
+            if channel.topic.endswith('/shape'):
+                stamp = msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec
+                out[(channel.topic, stamp)] = np.array(
+                    [(q.pose.position.x, q.pose.position.z) for q in msg.poses])
+    return out
+
+
+def assert_replay_reproduces_the_published_shapes(tmp_path):
+    """replay-model on the recorded inputs gives the shapes model_node published, to 1e-9 m."""
+    replayed = tmp_path / 'replayed.mcap'
+    replay_model(tmp_path / 'session.mcap', replayed, source='pressure', rigidity=False)
+    published = shapes_by_stamp(tmp_path / 'session.mcap')
+    again = shapes_by_stamp(replayed)
+    matched = [key for key in published if key in again]
+    # A shape answers the newest input, whose stamp it carries; the only published shapes
+    # without such an input are the start-up ones, before any pressure (one per finger).
+    assert len(published) - len(matched) <= 3, (len(published), len(matched))
+    assert len(matched) > 300
+    worst = max(float(np.max(np.abs(published[k] - again[k]))) for k in matched)
+    print(f'replayed {len(matched)} of {len(published)} published shapes; largest '
+          f'difference {worst:.3g} m')
+    assert worst <= 1e-9
 
 
 def test_path_tip_decoder_handles_empty_and_foreign_payloads():
