@@ -12,9 +12,8 @@ from visualization_msgs.msg import Marker
 
 __all__ = [
     'DEFAULT_ATMOSPHERIC_PRESSURE', 'FINGER_TOPICS', 'GRIPPER_TOPICS', 'MODEL_OUTPUT_TYPES',
-    'curvature_message', 'finger_topic', 'gauge_pressure', 'gripper_topics',
-    'model_messages', 'ns_to_time', 'rigidity_message', 'shape_message', 'tangent_angles',
-    'time_to_ns', 'tip_force_from_wrench',
+    'curvature_message', 'finger_topic', 'gripper_topics', 'model_messages', 'ns_to_time',
+    'rigidity_message', 'shape_message', 'tangent_angles', 'time_to_ns',
 ]
 
 #: Standard atmosphere, the default for absolute-to-gauge conversion [Pa].
@@ -274,44 +273,6 @@ def model_messages(result, frame_id, stamp_ns, rigidity=(None, None)):
         'curvature': curvature_message(result),
         'rigidity': rigidity_message(rigidity[0], rigidity[1], frame_id, stamp_ns),
     }
-
-
-def gauge_pressure(message, atmospheric_pressure=DEFAULT_ATMOSPHERIC_PRESSURE):
-    """
-    Gauge pressure of a ``sensor_msgs/FluidPressure`` (absolute) message.
-
-    Parameters
-    ----------
-    message : object
-        Has ``fluid_pressure`` (absolute) [Pa].
-    atmospheric_pressure : float
-        Reference [Pa].
-
-    Returns
-    -------
-    float
-        ``fluid_pressure - atmospheric_pressure`` [Pa].
-
-    """
-    return float(message.fluid_pressure) - float(atmospheric_pressure)
-
-
-def tip_force_from_wrench(message):
-    """
-    Tip force (f0, p0) of a ``geometry_msgs/WrenchStamped`` in the finger frame.
-
-    Parameters
-    ----------
-    message : object
-        Has ``wrench.force.x`` (f0) and ``wrench.force.z`` (p0) [N].
-
-    Returns
-    -------
-    tuple of float
-        (f0, p0) [N].
-
-    """
-    return float(message.wrench.force.x), float(message.wrench.force.z)
 
 
 # -- Additions for the model node: a fast serialized shape, and RViz/Foxglove markers. --------

@@ -5,15 +5,14 @@ from .design import ActuatorDesign, PAPER_MATERIALS
 from .ladder import ArcResult, ArcSolver, LadderResult, RodResult, RodSolver
 from .materials import default_emc_coefficients, fit_emc_polynomial, Material
 from .section_law import build_section_law, section_minimiser, SectionLaw, station_layout
-from .selection import (AdaptiveSolver, choose_model, ModelChoice, RefinedResult, RUNGS, Scene,
-                        solve_auto_refine)
+from .selection import AdaptiveSolver, choose_model, ModelChoice, RUNGS, Scene
 from .solver import CCMResult, CCMSolver, PRESSURE_MODELS, RigidityResult, SolverStatus
 
 __all__ = [
     'ActuatorDesign', 'AdaptiveSolver', 'ArcResult', 'ArcSolver', 'CCMResult', 'CCMSolver',
     'CircleFit', 'LadderResult', 'Material', 'ModelChoice', 'PAPER_MATERIALS',
-    'PRESSURE_MODELS', 'RUNGS', 'RefinedResult', 'RigidityResult', 'RodResult', 'RodSolver',
+    'PRESSURE_MODELS', 'RUNGS', 'RigidityResult', 'RodResult', 'RodSolver',
     'Scene', 'SectionLaw', 'SolverStatus', 'build_section_law', 'choose_model',
     'default_emc_coefficients', 'fit_circle', 'fit_emc_polynomial', 'flexural_rigidity',
-    'section_minimiser', 'solve_auto_refine', 'station_layout',
+    'section_minimiser', 'station_layout',
 ]

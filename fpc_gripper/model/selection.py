@@ -17,8 +17,7 @@ from .solver import CCMSolver, PRESSURE_MODELS
 from .validation import real_number
 
 __all__ = ['Scene', 'ModelChoice', 'RUNGS', 'choose_model', 'load_error_model', 'make_solver',
-           'scene_turning', 'a_posteriori_error', 'solve_auto_refine', 'RefinedResult',
-           'aligned_edges', 'AdaptiveSolver']
+           'scene_turning', 'a_posteriori_error', 'aligned_edges', 'AdaptiveSolver']
 
 #: Rungs of the ladder: uniform arc (a), CCM with the paper's reconstruction, CCM with the
 #: consistent reconstruction (uniform segments, or 'ccm_aligned': segment edges on every
@@ -378,92 +377,6 @@ def a_posteriori_error(scene, rung, n_segments):
     if rung == 'ccm':
         estimate += float(np.linalg.norm(results[1].tip - results[2].tip))
     return estimate
-
-
-class RefinedResult:
-    """
-    A CCM result after automatic refinement; other attributes come from `result`.
-
-    Attributes
-    ----------
-    success : bool
-        The final solve converged to a stable state that obeys the small-rotation rule.
-    message : str
-    n_segments : int
-        Segments of the final solve.
-    history : list of (int, bool, bool)
-        (N, success, valid) of every solve.
-    result : CCMResult
-
-    """
-
-    def __init__(self, result, history, success, message):
-        self.result = result
-        self.history = history
-        self.success = bool(success)
-        self.message = message
-        self.n_segments = result.solver.n_segments
-
-    def __getattr__(self, name):
-        return getattr(self.__dict__['result'], name)
-
-    def __repr__(self):
-        return (f'RefinedResult(success={self.success}, n_segments={self.n_segments}, '
-                f'tip={self.result.tip.round(6).tolist()})')
-
-
-def solve_auto_refine(design, pressure=0.0, tip_force=(0.0, 0.0), n_segments=8,
-                      max_segments=128, pressure_model='adiabatic', reconstruction='paper'):
-    """
-    Production path: damped Newton with continuation, doubling N until the result is valid.
-
-    A segment past the small-rotation rule (|2 d L_i| >= 1, about 45 degrees)
-    or a failed solve doubles N and solves again from the flat state.
-
-    Parameters
-    ----------
-    design : ActuatorDesign
-    pressure : float
-        Gauge pressure [Pa].
-    tip_force : (float, float)
-        (f0, p0) [N].
-    n_segments : int
-        First N.
-    max_segments : int
-        Largest N tried.
-    pressure_model : {'adiabatic', 'isobaric'}
-    reconstruction : {'paper', 'consistent'}
-
-    Returns
-    -------
-    RefinedResult
-        success False, with the reason, if no N <= max_segments gives a converged, valid state.
-
-    """
-    if isinstance(n_segments, bool) or not isinstance(n_segments, (int, np.integer)) \
-            or n_segments < 1:
-        raise ValueError(f'`n_segments` must be an integer >= 1, got {n_segments!r}')
-    if isinstance(max_segments, bool) or not isinstance(max_segments, (int, np.integer)) \
-            or max_segments < n_segments:
-        raise ValueError(f'`max_segments` must be an integer >= n_segments = {n_segments}, '
-                         f'got {max_segments!r}')
-    history = []
-    n = int(n_segments)
-    result = None
-    while n <= max_segments:
-        solver = CCMSolver(design, n_segments=n, pressure_model=pressure_model,
-                           reconstruction=reconstruction)
-        result = solver.solve(pressure, tip_force)
-        history.append((n, result.success, result.valid))
-        if result.success and result.valid:
-            note = '' if n == n_segments else f' after refinement to N = {n}'
-            return RefinedResult(result, history, True, result.message + note)
-        n *= 2
-    last = history[-1]
-    why = ('did not converge: ' + result.message) if not last[1] else \
-        'still breaks the small-rotation rule'
-    return RefinedResult(result, history, False,
-                         f'no valid equilibrium up to N = {last[0]}: {why}')
 
 
 class AdaptiveSolver:

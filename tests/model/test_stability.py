@@ -1,13 +1,15 @@
 """Honest convergence reports, the production path's envelope, and model selection."""
 
+import copy
 import itertools
 
 import numpy as np
 import pytest
 from scipy.optimize._numdiff import approx_derivative
 
-from fpc_gripper.model import (ActuatorDesign, CCMSolver, choose_model, PRESSURE_MODELS,
-                               RodSolver, Scene, solve_auto_refine, SolverStatus)
+from fpc_gripper.model import (ActuatorDesign, AdaptiveSolver, CCMSolver, choose_model,
+                               PRESSURE_MODELS, RodSolver, Scene, SolverStatus)
+from fpc_gripper.model.pipeline import finger_model, ModelSettings
 from fpc_gripper.model.section_law import station_layout
 from fpc_gripper.model.selection import a_posteriori_error, load_error_model, make_solver
 
@@ -131,7 +133,7 @@ def test_rod_success_means_equilibrium():
     assert not unconverged.success and unconverged.message
 
 
-# -- production path: damped Newton + continuation + automatic refinement ---------------
+# -- production path: the finger pipeline (choice, damped Newton, refinement) -----------
 ENVELOPE = list(itertools.product(
     (0.05, 0.30, 0.60), (0.0, 250e3, 500e3),
     ((0.0, 0.0), (1.0, 0.0), (-1.0, 0.0), (0.0, 1.0), (0.0, -1.0))))
@@ -139,21 +141,30 @@ ENVELOPE = list(itertools.product(
 
 def test_production_path_converges_over_the_envelope():
     for prestrain, pressure, force in ENVELOPE:
-        result = solve_auto_refine(ActuatorDesign.paper(prestrain), pressure, force)
+        design = ActuatorDesign.paper(prestrain)
+        result = finger_model(design, ModelSettings()).solve(pressure, force)
         assert result.success and result.valid, (prestrain, pressure, force, result.message)
-        assert result.n_segments <= 32
 
 
-def test_auto_refine_doubles_n_and_reports_failure():
+def test_refinement_doubles_n_until_valid():
+    """A choice that breaks the small-rotation rule is refined; the result says so."""
+    model = copy.deepcopy(load_error_model())
+    model['ranges']['prestrain'] = [0.05, 0.7]
+    for entry in model['models']:
+        if (entry['rung'], entry['n_segments']) == ('ccm', 2):
+            # Claim N = 2 is exact everywhere: it is chosen, and breaks the rule at 0.60.
+            entry['bound'] = [[0.0] * len(row) for row in entry['bound']]
+            entry['invalid'] = [[False] * len(row) for row in entry['invalid']]
+            entry['cost'] = 0.0
     design = ActuatorDesign.paper(0.60)
-    refined = solve_auto_refine(design, 0.0, (0.0, 0.0), n_segments=2)
-    assert refined.success and refined.valid and refined.n_segments > 2
-    assert refined.history[0] == (2, True, False)
-    assert 'refinement' in refined.message
-    stuck = solve_auto_refine(design, 0.0, (0.0, 0.0), n_segments=1, max_segments=2)
-    assert not stuck.success and 'small-rotation' in stuck.message
-    with pytest.raises(ValueError, match='max_segments'):
-        solve_auto_refine(design, n_segments=8, max_segments=4)
+    assert CCMSolver(design, n_segments=2).solve(0.0).valid is False
+    refined = AdaptiveSolver(design, tolerance=1e-3, error_model=model).solve(0.0)
+    assert refined.success and refined.valid
+    assert refined.model_choice.rung == 'ccm' and refined.model_choice.n_segments > 2
+    assert 'refined to N' in refined.model_choice.reason
+    stuck = AdaptiveSolver(design, tolerance=1e-3, error_model=model, max_segments=2)
+    result = stuck.solve(0.0)
+    assert result.success and not result.valid and result.model_choice.n_segments == 2
 
 
 # -- model selection ------------------------------------------------------------------
@@ -193,7 +204,6 @@ def test_choose_model_bound_holds(prestrain, pressure, force, tolerance):
 
 def test_choose_model_never_reads_a_measured_time():
     """Scrambling the stored timings changes no choice; without static costs it refuses."""
-    import copy
     import random
     model = load_error_model()
     scrambled = copy.deepcopy(model)
