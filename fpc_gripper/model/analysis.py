@@ -85,7 +85,8 @@ def fit_circle(points):
 
     References
     ----------
-    Chernov, "Circular and Linear Regression" (2010), Sections 5.3 and 8.2.
+    Chernov, "Circular and Linear Regression" (2010), Sections 5.3 and 8.2;
+    docs/physics.md, section 9.
 
     """
     pts = np.asarray(points, dtype=float)
@@ -153,6 +154,10 @@ def flexural_rigidity(force, lever, displacement):
         Lever arm in the loaded state [m].
     displacement : float
         Imposed tip displacement [m].
+
+    References
+    ----------
+    Zhou, Headings, Dapino (2022), eq. (22); docs/physics.md, section 10.
 
     """
     return force * abs(lever) ** 3 / (3.0 * displacement)

@@ -84,7 +84,8 @@ class ActuatorDesign:
 
     References
     ----------
-    Zhou, Headings, Dapino (2022), Tables II-III; SPEC "Geometry".
+    Zhou, Headings, Dapino (2022), Tables II-III; SPEC "Geometry"; docs/physics.md,
+    sections 2 and 3.
 
     """
 

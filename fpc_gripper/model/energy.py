@@ -63,7 +63,8 @@ def segment_energy(q, seg, prestrain, emc, pressure_work):
 
     References
     ----------
-    Zhou, Headings, Dapino (2022), eqs. (5)-(12), (19)-(20); SPEC "Energy", "Pressure work".
+    Zhou, Headings, Dapino (2022), eqs. (5)-(12), (19)-(20); SPEC "Energy", "Pressure work";
+    docs/physics.md, sections 5 and 6.
 
     """
     y, strain = _strain_state(q, seg, prestrain)
@@ -174,7 +175,7 @@ def load_derivatives(q, lengths, loads):
 
     References
     ----------
-    Zhou, Headings, Dapino (2022), eqs. (1), (15)-(18).
+    Zhou, Headings, Dapino (2022), eqs. (1), (15)-(18); docs/physics.md, section 7.
 
     """
     n = q.shape[0]

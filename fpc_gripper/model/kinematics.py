@@ -31,7 +31,8 @@ def end_rotation(q):
 
     References
     ----------
-    Zhou, Headings, Dapino (2022), eq. (16), with SPEC's erratum (no stray L_i).
+    Zhou, Headings, Dapino (2022), eq. (16), with SPEC's erratum (no stray L_i);
+    docs/physics.md, section 4.
 
     """
     return np.arctan2(2.0 * q[:, 3], 1.0 + q[:, 0] + 3.0 * q[:, 1])
@@ -130,6 +131,10 @@ def consistent_strain_map(q):
         d qs / d qt.
     hess3 : ndarray, shape (N, 4, 4)
         d^2 qs[3] / d qt^2 (the only nonlinear component).
+
+    References
+    ----------
+    docs/physics.md, section 11.1; docs/model_notes.md, "CCM reconstruction vs rod".
 
     """
     n = q.shape[0]

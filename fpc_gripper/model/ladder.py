@@ -269,6 +269,10 @@ class ArcSolver(_LadderSolver):
     max_iterations : int
         Newton iterations per (sub)solve.
 
+    References
+    ----------
+    docs/physics.md, sections 11.2 and 11.3.
+
     """
 
     _result_type = ArcResult
@@ -437,6 +441,10 @@ class RodSolver(_LadderSolver):
         Midplane samples M at evenly spaced reference arc length, root to tip.
     max_iterations : int
         Newton iterations per (sub)solve.
+
+    References
+    ----------
+    docs/physics.md, section 11.4; docs/model_notes.md, "Rod kinematics".
 
     """
 

@@ -46,7 +46,7 @@ class Material:
 
     References
     ----------
-    Zhou, Headings, Dapino (2022), eq. (6).
+    Zhou, Headings, Dapino (2022), eq. (6); docs/physics.md, section 3.
 
     """
 
@@ -181,7 +181,7 @@ def fit_emc_polynomial(strain, stress, check_range=None):
 
     References
     ----------
-    Zhou, Headings, Dapino (2022), Table I and eq. (7).
+    Zhou, Headings, Dapino (2022), Table I and eq. (7); docs/physics.md, section 3.
 
     """
     s = np.asarray(strain, dtype=float).ravel()

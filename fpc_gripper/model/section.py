@@ -156,7 +156,8 @@ def build_segments(design, edges):
 
     References
     ----------
-    Zhou, Headings, Dapino (2022), eqs. (5)-(12) and (19); SPEC "Geometry", "Energy".
+    Zhou, Headings, Dapino (2022), eqs. (5)-(12) and (19); SPEC "Geometry", "Energy";
+    docs/physics.md, sections 2, 5 and 6.
 
     """
     edges = np.asarray(edges, dtype=float)

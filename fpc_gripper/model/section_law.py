@@ -50,7 +50,8 @@ class SectionLaw:
 
     References
     ----------
-    Zhou, Headings, Dapino (2022), eqs. (5)-(12), (19)-(20); SPEC "Energy".
+    Zhou, Headings, Dapino (2022), eqs. (5)-(12), (19)-(20); SPEC "Energy";
+    docs/physics.md, section 11.2.
 
     """
 

@@ -279,6 +279,10 @@ def choose_model(scene, tolerance, error_model=None):
     -------
     ModelChoice
 
+    References
+    ----------
+    docs/physics.md, section 11.5.
+
     """
     if not isinstance(scene, Scene):
         raise TypeError(f'`scene` must be a Scene, got {type(scene).__name__}')

@@ -252,7 +252,7 @@ class CCMSolver:
 
     References
     ----------
-    Zhou, Headings, Dapino (2022), Section III; SPEC.
+    Zhou, Headings, Dapino (2022), Section III; SPEC; docs/physics.md, sections 4-8.
 
     """
 
@@ -466,7 +466,7 @@ class CCMSolver:
 
         References
         ----------
-        Zhou, Headings, Dapino (2022), eq. (21).
+        Zhou, Headings, Dapino (2022), eq. (21); docs/physics.md, section 8.
 
         """
         pressure = real_number('pressure', pressure, '[Pa]')
@@ -549,6 +549,10 @@ class CCMSolver:
         RigidityResult
             K_x = f0 |Z_tip|^3 / (3 delta) or K_z = p0 |X_tip|^3 / (3 delta), levers
             in the loaded state [N m^2].
+
+        References
+        ----------
+        Zhou, Headings, Dapino (2022), eq. (22); docs/physics.md, section 10.
 
         """
         if axis not in ('x', 'z'):
