@@ -5,10 +5,12 @@ import math
 import numpy as np
 from scipy.linalg import cho_factor, cho_solve, eigh
 
+from . import engine
 from .analysis import CircleFitted
 from .design import ActuatorDesign
+from .engine import linear_solve, linear_step, NewtonOptions, SolverStatus
 from .section_law import station_layout
-from .solver import PRESSURE_MODELS, RigidityResult, SolverStatus
+from .solver import PRESSURE_MODELS, RigidityResult
 from .validation import real_number
 
 __all__ = ['ArcSolver', 'RodSolver', 'LadderResult', 'RodResult', 'ArcResult']
@@ -127,9 +129,35 @@ def _check_solve(pressure, tip_force):
 
 
 class _LadderSolver:
-    """Shared solve/continuation/rigidity logic of the non-CCM rungs."""
+    """
+    Shared solve and rigidity of the non-CCM rungs: discretisations of the one engine.
+
+    A subclass provides `_pack`/`_unpack` between its state and the engine's flat
+    unknowns, `_flat_state`, `energy`, `derivatives`, `step`, `solve_linear`,
+    `node_jacobian`, `gradient_scale` and `_options`; the Newton loop, the warm-start
+    rule, continuation and displacement control are the engine's.
+    """
 
     _result_type = LadderResult
+
+    @property
+    def tip_node(self):
+        """Index of the tip node, where these rungs take their load."""
+        return self.n_segments
+
+    def flat(self):
+        """Return the flat, unstrained state as engine unknowns."""
+        return self._pack(self._flat_state())
+
+    def _force(self, loads):
+        """Total tip force (F_X, F_Z) [N] of engine loads (these rungs load the tip only)."""
+        force = np.zeros(2)
+        for node, value in loads:
+            if node != self.tip_node:
+                raise ValueError(f'{type(self).__name__} takes a load at the tip only, got '
+                                 f'one at node {node}')
+            force = force + np.asarray(value, dtype=float)
+        return force
 
     def solve(self, pressure=0.0, tip_force=(0.0, 0.0), initial=None):
         """
@@ -157,46 +185,18 @@ class _LadderSolver:
                                         and initial.solver._compatible(self)):
             raise ValueError(f'`initial` must be None or a {self._result_type.__name__} of a '
                              'solver with the same discretisation')
-        its = 0
-        if initial is not None:
-            # A warm start only saves iterations: if it does not reach a stable equilibrium
-            # the solve starts again exactly as a fresh one.
-            state, status, its, step = self._newton(initial.state, pressure, force)
-            if status is SolverStatus.SUCCESS:
-                return self._result_type(self, state, status, its, step, pressure, force)
-        flat = self._flat_state()
-        state, status, n, step = self._newton(flat, pressure, force)
-        its += n
-        if status in (SolverStatus.SUCCESS, SolverStatus.UNSTABLE):
-            return self._result_type(self, state, status, its, step, pressure, force)
-        # Continuation: march pressure and load from the unloaded state to the target.
-        state, status, n, step = self._newton(flat, 0.0, np.zeros(2))
-        its += n
-        if status is not SolverStatus.SUCCESS:
-            return self._result_type(self, state, SolverStatus.CONTINUATION_FAILED, its,
-                                     step, pressure, force, fraction=0.0)
-        lam, dlam = 0.0, 0.25
-        while True:
-            target = min(1.0, lam + dlam)
-            new, status, n, step = self._newton(state, target * pressure, target * force)
-            its += n
-            if status is SolverStatus.SUCCESS:
-                state, lam = new, target
-                dlam = min(2.0 * dlam, 1.0)
-                if lam >= 1.0:
-                    return self._result_type(self, state, status, its, step, pressure, force)
-            else:
-                dlam *= 0.5
-                if dlam < 1.0 / 256:
-                    return self._result_type(self, state, SolverStatus.CONTINUATION_FAILED,
-                                             its, step, pressure, force, fraction=lam)
+        x0 = None if initial is None else self._pack(initial.state)
+        loads = [(self.tip_node, force)] if force.any() else []
+        out = engine.solve(self, pressure, loads, self._options, x0)
+        return self._result_type(self, self._unpack(out.x), out.status, out.iterations,
+                                 out.step, pressure, force, fraction=out.fraction)
 
     def rigidity(self, pressure=0.0, axis='x', displacement=0.010, initial=None):
         """
         Flexural rigidity at fixed pressure by displacement control, eq. (22).
 
-        The tip force along +X (or +Z) that moves the tip by `displacement`
-        along that axis is found by secant iterations on warm-started solves.
+        The engine's bordered system finds the tip force along +X (or +Z) whose
+        equilibrium moves the tip by `displacement` along that axis.
 
         Returns
         -------
@@ -216,34 +216,23 @@ class _LadderSolver:
                                   None, unloaded.iterations)
         k = 0 if axis == 'x' else 1
         direction = np.eye(2)[k]
-        start = unloaded.tip[k]
-        iterations = unloaded.iterations
-        # Probe the initial stiffness with a small force, then secant steps.
-        f_a, d_a = 0.0, 0.0
-        f_b = 1e-3
-        res_b = self.solve(pressure, tuple(f_b * direction), initial=unloaded)
-        iterations += res_b.iterations
-        d_b = res_b.tip[k] - start
-        for _ in range(60):
-            if not res_b.success:
-                break
-            if abs(d_b - delta) <= 1e-11 * delta:
-                lever = abs(res_b.tip[1 - k])
-                return RigidityResult(axis, delta, f_b, lever, True, 'converged', unloaded,
-                                      res_b, iterations)
-            slope = (d_b - d_a) / (f_b - f_a)
-            if not (math.isfinite(slope) and slope != 0.0):
-                break
-            f_new = f_b + (delta - d_b) / slope
-            # Keep the steps modest so that warm starts stay in the basin.
-            f_new = f_b + max(-1.0, min(1.0, f_new - f_b))
-            res_new = self.solve(pressure, tuple(f_new * direction), initial=res_b)
-            iterations += res_new.iterations
-            f_a, d_a = f_b, d_b
-            f_b, d_b, res_b = f_new, res_new.tip[k] - start, res_new
-        return RigidityResult(axis, delta, f_b, math.nan, False,
-                              'displacement control did not converge', unloaded, res_b,
-                              iterations)
+        out = engine.rigidity(self, self._pack(unloaded.state), pressure, self.tip_node,
+                              direction, delta, self._options)
+        iterations = unloaded.iterations + out.iterations
+        force = out.force * direction
+        if not out.success:
+            loaded = self._result_type(self, self._unpack(out.x),
+                                       SolverStatus.CONTINUATION_FAILED, iterations, math.inf,
+                                       pressure, force, fraction=out.fraction)
+            return RigidityResult(axis, delta, out.force, math.nan, False,
+                                  f'displacement control stalled at {out.fraction:.1%} of '
+                                  'the displacement', unloaded, loaded, iterations)
+        loaded = self._result_type(self, self._unpack(out.x), SolverStatus.SUCCESS,
+                                   iterations, 0.0, pressure, force)
+        message = 'converged' + ('' if out.stable else
+                                 ' (loaded state is unstable under force control)')
+        return RigidityResult(axis, delta, out.force, abs(loaded.tip[1 - k]), True, message,
+                              unloaded, loaded, iterations)
 
 
 class ArcSolver(_LadderSolver):
@@ -291,6 +280,10 @@ class ArcSolver(_LadderSolver):
         self.law = law.mean(np.bincount(types, np.diff(breaks), minlength=law.n_types))
         self.length = design.free_length
         self._scale = np.array([1.0, self.length, 1.0])
+        # Axial stiffness of the finger [J]: the scale of gradients in (eps, kappa L, c1).
+        self.gradient_scale = float(self.law.stiffness[:, 0, 0].max()) * self.length
+        self._options = NewtonOptions(max_iterations=self.max_iterations, xtol=self.tol,
+                                      max_step=0.5, flat_slope=1e-14, energy_scale=1e-6)
 
     def _compatible(self, other):
         return isinstance(other, ArcSolver)
@@ -328,41 +321,42 @@ class ArcSolver(_LadderSolver):
         hess[1, 1] -= force @ (stretch * length ** 3 * d2)
         return energy, grad, hess
 
-    def _newton(self, y, pressure, force):
+    # -- the discretisation's side of the engine: unknowns (eps, kappa L, c1) ----------
+    def _pack(self, y):
+        return np.asarray(y, dtype=float) * self._scale
+
+    def _unpack(self, x):
+        return x / self._scale
+
+    def derivatives(self, x, pressure, loads):
+        """Energy [J], gradient and Hessian in the scaled unknowns (eps, kappa L, c1)."""
         sc = self._scale
-        y = np.array(y, dtype=float)
-        energy, grad, hess = self._derivatives(y, pressure, force)
-        step_norm = math.inf
-        for it in range(1, self.max_iterations + 1):
-            if not (np.isfinite(energy) and np.all(np.isfinite(grad))):
-                return y, SolverStatus.NOT_FINITE, it, step_norm
-            hs = hess / sc[:, None] / sc[None, :]
-            gs = grad / sc
-            lam, vec = np.linalg.eigh(hs)
-            pd = lam.min() > 0.0
-            lam = np.maximum(np.abs(lam), 1e-10 * np.abs(lam).max())
-            step_s = -vec @ ((vec.T @ gs) / lam)
-            step_norm = float(np.abs(step_s).max())
-            if step_norm <= self.tol:
-                y = y + step_s / sc
-                return y, SolverStatus.SUCCESS if pd else SolverStatus.UNSTABLE, it, step_norm
-            if step_norm > 0.5:
-                step_s *= 0.5 / step_norm
-            step = step_s / sc
-            slope = float(grad @ step)
-            alpha = 1.0
-            while True:
-                trial = y + alpha * step
-                e_trial = self._derivatives(trial, pressure, force)[0]
-                if e_trial <= energy + 1e-4 * alpha * slope or \
-                        -alpha * slope <= 1e-14 * (abs(energy) + 1e-6):
-                    break
-                alpha *= 0.5
-                if alpha < 1e-10:
-                    return y, SolverStatus.LINE_SEARCH_FAILED, it, step_norm
-            y = trial
-            energy, grad, hess = self._derivatives(y, pressure, force)
-        return y, SolverStatus.MAX_ITERATIONS, self.max_iterations, step_norm
+        energy, grad, hess = self._derivatives(x / sc, pressure, self._force(loads))
+        return energy, grad / sc, hess / sc[:, None] / sc[None, :]
+
+    def energy(self, x, pressure, loads):
+        """Total potential [J] at scaled unknowns `x`."""
+        return self.derivatives(x, pressure, loads)[0]
+
+    @staticmethod
+    def step(grad, hess):
+        """Newton step of the 3 x 3 system (eigenvalues mirrored where indefinite)."""
+        return linear_step(grad, hess, floor=1e-10)
+
+    solve_linear = staticmethod(linear_solve)
+
+    def node_jacobian(self, x, node):
+        """Tip position [m] and its derivatives in the scaled unknowns, (2, 3)."""
+        if node != self.tip_node:
+            raise ValueError(f'ArcSolver has nodes 0 and 1 (the tip), got {node}')
+        length, sc = self.length, self._scale
+        y = x / sc
+        i0, i1 = self._arc_integrals(y[1] * length, orders=2)
+        stretch = 1.0 + y[0]
+        jac = np.zeros((2, 3))
+        jac[:, 0] = length * i0
+        jac[:, 1] = stretch * length ** 2 * np.array([-i1[1], i1[0]])
+        return stretch * length * i0, jac / sc[None, :]
 
     def _outputs(self, y, pressure, force):
         length = self.length
@@ -380,6 +374,42 @@ class ArcSolver(_LadderSolver):
             'nodes': np.array([[0.0, 0.0], tip]),
             'energy': float(self._derivatives(y, pressure, force)[0]),
         }
+
+
+class _PointwiseLocal:
+    """
+    The rod's (eps, c1) at given (theta, kappa) points, as a discretisation of the engine.
+
+    Every point decouples, so the Hessian is (M, 2, 2) blocks.
+    """
+
+    def __init__(self, rod, th, kap, force, types, pressure):
+        self.rod, self.th, self.kap, self.force, self.types = rod, th, kap, force, types
+        self.pressure = pressure
+        self.gradient_scale = rod.gradient_scale
+
+    def energy(self, b, pressure, loads):
+        b = b.reshape(self.th.shape + (2,))
+        return float(self.rod._local(self.th, self.kap, b, self.pressure, self.force,
+                                     self.types)[0].sum())
+
+    def derivatives(self, b, pressure, loads):
+        b = b.reshape(self.th.shape + (2,))
+        w, g, h, gf, _, _ = self.rod._local(self.th, self.kap, b, self.pressure, self.force,
+                                            self.types)
+        gb = np.stack([g[..., 0] - gf, g[..., 2]], axis=-1)
+        return float(w.sum()), gb.reshape(-1, 2), h[..., [[0], [2]], [0, 2]].reshape(-1, 2, 2)
+
+    step = staticmethod(linear_step)
+
+
+class _RodHessian:
+    """Pointwise Hessian blocks of the rod in a = (theta, kappa) and b = (eps, c1)."""
+
+    __slots__ = ('th', 'haa', 'hab', 'hbb')
+
+    def __init__(self, th, haa, hab, hbb):
+        self.th, self.haa, self.hab, self.hbb = th, haa, hab, hbb
 
 
 def _gll_nodes(degree):
@@ -492,6 +522,11 @@ class RodSolver(_LadderSolver):
         self._qtypes = np.repeat(self.element_types[:, None], xq.size, axis=1)
         # Scale of the tip-rotation Hessian: EI of the stiffest section over L [J].
         self._theta_scale = float(self.law.stiffness[:, 1, 1].max()) / self.length
+        self.gradient_scale = self._theta_scale
+        cap = np.full(self.n_theta - 1 + 2 * self._qtypes.size, 0.1)
+        cap[:self.n_theta - 1] = 0.5
+        self._options = NewtonOptions(max_iterations=self.max_iterations, xtol=self.tol,
+                                      max_step=cap, energy_scale=self._theta_scale)
 
     def _compatible(self, other):
         return (isinstance(other, RodSolver) and other.degree == self.degree
@@ -523,14 +558,43 @@ class RodSolver(_LadderSolver):
         w = self._local(th, kap, b, pressure, force, self._qtypes)[0]
         return float((self._weights * w).sum())
 
-    def _newton_step(self, state, pressure, force):
-        """Return (energy, step, positive_definite, slope) of the condensed Newton system."""
+    # -- the discretisation's side of the engine --------------------------------------
+    # Unknowns: theta at the nodes but the clamped root (theta_0 = 0), then (eps, c1) at
+    # every quadrature point.
+    def _pack(self, state):
         theta, b = state
+        return np.concatenate([theta[1:], np.ravel(b)])
+
+    def _unpack(self, x):
+        theta = np.concatenate([[0.0], x[:self.n_theta - 1]])
+        return theta, x[self.n_theta - 1:].reshape(self._qtypes.shape + (2,))
+
+    def energy(self, x, pressure, loads):
+        """Total potential [J] at engine unknowns `x`."""
+        return self._energy(self._unpack(x), pressure, self._force(loads))
+
+    def _assemble(self, values_a):
+        """Sum sum_q (v_q0 N_a + v_q1 N_a') over each element into the theta dofs, (n_theta,)."""
+        rvec = (np.einsum('eq,qa->ea', values_a[..., 0], self._basis)
+                + np.einsum('eq,eqa->ea', values_a[..., 1], self._dbasis))
+        out = np.zeros(self.n_theta)
+        np.add.at(out, self._dofs, rvec)
+        return out
+
+    def derivatives(self, x, pressure, loads):
+        """
+        Energy [J], gradient and the pointwise Hessian blocks of the rod potential.
+
+        The Hessian is returned as its pointwise blocks in a = (theta, kappa) and
+        b = (eps, c1) (a `_RodHessian`): `step` and `solve_linear` condense b point by
+        point, which keeps the system the size of the theta dofs.
+        """
+        theta, b = self._unpack(x)
+        force = self._force(loads)
         th, kap = self._point_fields(theta)
         w, g, h, gf, gfp, stretch = self._local(th, kap, b, pressure, force, self._qtypes)
-        energy = float((self._weights * w).sum())
         wt = self._weights
-        # Local blocks: a = (theta, kappa), b = (eps, c1).
+        energy = float((wt * w).sum())
         ga = np.stack([-stretch * gfp, g[..., 1]], axis=-1)
         gb = np.stack([g[..., 0] - gf, g[..., 2]], axis=-1)
         haa = np.zeros(th.shape + (2, 2))
@@ -541,56 +605,80 @@ class RodSolver(_LadderSolver):
         hab[..., 1, 0] = h[..., 1, 0]
         hab[..., 1, 1] = h[..., 1, 2]
         hbb = h[..., [[0], [2]], [0, 2]]
+        grad = np.concatenate([self._assemble(wt[..., None] * ga)[1:],
+                               (wt[..., None] * gb).ravel()])
+        return energy, grad, _RodHessian(th, haa, hab, hbb)
+
+    def _condensed(self, hess, rhs, mirror):
+        """
+        Solve the Newton system for `rhs` with (eps, c1) condensed point by point.
+
+        Returns (solution, positive_definite); raises LinAlgError where the pointwise
+        blocks are not positive definite, and, unless `mirror`, where the condensed
+        system is singular. With `mirror` an indefinite condensed system has its
+        eigenvalues mirrored (the step still descends, the local blocks being definite).
+        """
+        hab, hbb = hess.hab, hess.hbb
         det = hbb[..., 0, 0] * hbb[..., 1, 1] - hbb[..., 0, 1] * hbb[..., 1, 0]
-        if not (np.all(np.isfinite(h)) and np.isfinite(energy)):
-            return energy, None, False, 0.0
-        local_pd = bool(np.all(det > 0.0) and np.all(hbb[..., 0, 0] > 0.0))
-        if local_pd:
-            inv = np.empty_like(hbb)
-            inv[..., 0, 0] = hbb[..., 1, 1] / det
-            inv[..., 1, 1] = hbb[..., 0, 0] / det
-            inv[..., 0, 1] = -hbb[..., 0, 1] / det
-            inv[..., 1, 0] = -hbb[..., 1, 0] / det
-            hab_inv = np.einsum('...ij,...jk->...ik', hab, inv)
-            schur = haa - np.einsum('...ij,...kj->...ik', hab_inv, hab)
-            ra = ga - np.einsum('...ij,...j->...i', hab_inv, gb)
-            nb, db = self._basis, self._dbasis                          # (Q, a), (E, Q, a)
-            kmat = (np.einsum('eq,qa,qb->eab', wt * schur[..., 0, 0], nb, nb)
-                    + np.einsum('eq,qa,eqb->eab', wt * schur[..., 0, 1], nb, db)
-                    + np.einsum('eq,eqa,qb->eab', wt * schur[..., 1, 0], db, nb)
-                    + np.einsum('eq,eqa,eqb->eab', wt * schur[..., 1, 1], db, db))
-            rvec = (np.einsum('eq,qa->ea', wt * ra[..., 0], nb)
-                    + np.einsum('eq,eqa->ea', wt * ra[..., 1], db))
-            n = self.n_theta
-            big = np.zeros((n, n))
-            rhs = np.zeros(n)
-            dofs = self._dofs
-            np.add.at(big, (dofs[:, :, None], dofs[:, None, :]), kmat)
-            np.add.at(rhs, dofs, rvec)
-            dtheta = np.zeros(n)
-            kred = big[1:, 1:] / self._theta_scale
-            try:
-                factor = cho_factor(kred, check_finite=False)
-                dtheta[1:] = -cho_solve(factor, rhs[1:] / self._theta_scale,
-                                        check_finite=False)
-                pd = True
-            except np.linalg.LinAlgError:
-                # Indefinite Schur complement: mirror its eigenvalues. With the local
-                # blocks positive definite the condensed step still descends.
+        if not (np.all(np.isfinite(hbb)) and np.all(det > 0.0)
+                and np.all(hbb[..., 0, 0] > 0.0)):
+            raise np.linalg.LinAlgError('pointwise (eps, c1) blocks not positive definite')
+        inv = np.empty_like(hbb)
+        inv[..., 0, 0] = hbb[..., 1, 1] / det
+        inv[..., 1, 1] = hbb[..., 0, 0] / det
+        inv[..., 0, 1] = -hbb[..., 0, 1] / det
+        inv[..., 1, 0] = -hbb[..., 1, 0] / det
+        wt = self._weights
+        hab_inv = np.einsum('...ij,...jk->...ik', hab, inv)
+        schur = hess.haa - np.einsum('...ij,...kj->...ik', hab_inv, hab)
+        nb, db = self._basis, self._dbasis                              # (Q, a), (E, Q, a)
+        kmat = (np.einsum('eq,qa,qb->eab', wt * schur[..., 0, 0], nb, nb)
+                + np.einsum('eq,qa,eqb->eab', wt * schur[..., 0, 1], nb, db)
+                + np.einsum('eq,eqa,qb->eab', wt * schur[..., 1, 0], db, nb)
+                + np.einsum('eq,eqa,eqb->eab', wt * schur[..., 1, 1], db, db))
+        n = self.n_theta
+        big = np.zeros((n, n))
+        dofs = self._dofs
+        np.add.at(big, (dofs[:, :, None], dofs[:, None, :]), kmat)
+        r_theta = np.concatenate([[0.0], rhs[:n - 1]])
+        r_b = rhs[n - 1:].reshape(hbb.shape[:-1])
+        # K dtheta = r_theta - sum_q B^T hab hbb^-1 r_b,q (B maps theta dofs to (theta, kappa)).
+        reduced = r_theta - self._assemble(np.einsum('...ij,...j->...i', hab_inv, r_b))
+        kred = big[1:, 1:] / self._theta_scale
+        dtheta = np.zeros(n)
+        positive = True
+        try:
+            factor = cho_factor(kred, check_finite=False)
+            dtheta[1:] = cho_solve(factor, reduced[1:] / self._theta_scale, check_finite=False)
+        except np.linalg.LinAlgError:
+            positive = False
+            if not mirror:
+                dtheta[1:] = np.linalg.solve(kred, reduced[1:] / self._theta_scale)
+            else:
                 lam, vec = eigh(kred, check_finite=False)
                 lam = np.maximum(np.abs(lam), 1e-10 * np.abs(lam).max())
-                dtheta[1:] = -vec @ ((vec.T @ rhs[1:] / self._theta_scale) / lam)
-                pd = False
-            dth, dkap = self._point_fields(dtheta)
-            da = np.stack([dth, dkap], axis=-1)
-            dbv = -np.einsum('...ij,...j->...i', inv,
-                             gb + np.einsum('...ji,...j->...i', hab, da))
-            slope = float((wt[..., None] * (ga * da + gb * dbv)).sum())
-            return energy, (dtheta, dbv), pd, slope
-        return (energy, *self._full_step(th, ga, gb, haa, hab, hbb), False)
+                dtheta[1:] = vec @ ((vec.T @ reduced[1:] / self._theta_scale) / lam)
+        dth, dkap = self._point_fields(dtheta)
+        da = np.stack([dth, dkap], axis=-1)
+        dbv = np.einsum('...ij,...j->...i', inv,
+                        r_b / wt[..., None] - np.einsum('...ji,...j->...i', hab, da))
+        return np.concatenate([dtheta[1:], dbv.ravel()]), positive
 
-    def _full_step(self, th, ga, gb, haa, hab, hbb):
+    def step(self, grad, hess):
+        """Newton step, condensed; the full system with mirrored eigenvalues otherwise."""
+        try:
+            dx, positive = self._condensed(hess, -grad, mirror=True)
+            return dx, 1.0 if positive else -1.0
+        except np.linalg.LinAlgError:
+            return self._full_step(grad, hess), -1.0
+
+    def solve_linear(self, hess, rhs):
+        """Solve the Newton system H x = rhs (condensed); LinAlgError if it cannot."""
+        return self._condensed(hess, rhs, mirror=False)[0]
+
+    def _full_step(self, grad, hess):
         """Newton step on the full system with mirrored eigenvalues (indefinite case)."""
+        th, haa, hab, hbb = hess.th, hess.haa, hess.hab, hess.hbb
         n = self.n_theta
         npts = th.size
         size = n + 2 * npts
@@ -598,11 +686,9 @@ class RodSolver(_LadderSolver):
         nb = np.broadcast_to(self._basis, self._dbasis.shape)
         bmat = np.stack([nb, self._dbasis], axis=2)                     # (E, Q, 2, a)
         big = np.zeros((size, size))
-        grad = np.zeros(size)
         dofs = self._dofs
         kaa = np.einsum('eq,eqia,eqij,eqjb->eab', wt, bmat, haa, bmat)
         np.add.at(big, (dofs[:, :, None], dofs[:, None, :]), kaa)
-        np.add.at(grad, dofs, np.einsum('eq,eqia,eqi->ea', wt, bmat, ga))
         bidx = n + np.arange(2 * npts).reshape(th.shape + (2,))
         kab = np.einsum('eq,eqia,eqij->eqaj', wt, bmat, hab)
         rows = np.broadcast_to(dofs[:, None, :, None], kab.shape)
@@ -613,61 +699,40 @@ class RodSolver(_LadderSolver):
         r2 = np.broadcast_to(bidx[..., :, None], kbb.shape)
         c2 = np.broadcast_to(bidx[..., None, :], kbb.shape)
         np.add.at(big, (r2, c2), kbb)
-        grad[n:] = (wt[..., None] * gb).ravel()
         keep = np.arange(1, size)
         hh = big[np.ix_(keep, keep)]
         d = np.sqrt(np.maximum(np.abs(np.diag(hh)), 1e-300))
         lam, vec = eigh(hh / d[:, None] / d[None, :], check_finite=False)
         lam = np.maximum(np.abs(lam), 1e-10 * np.abs(lam).max())
-        step = np.zeros(size)
-        step[1:] = -(vec @ ((vec.T @ (grad[1:] / d)) / lam)) / d
-        return (step[:n], step[n:].reshape(th.shape + (2,))), False, float(grad @ step)
+        return -(vec @ ((vec.T @ (grad / d)) / lam)) / d
 
-    def _newton(self, state, pressure, force):
-        theta, b = state[0].copy(), state[1].copy()
-        step_norm = math.inf
-        for it in range(1, self.max_iterations + 1):
-            energy, step, pd, slope = self._newton_step((theta, b), pressure, force)
-            if step is None or not np.isfinite(energy):
-                return (theta, b), SolverStatus.NOT_FINITE, it, step_norm
-            dtheta, db = step
-            step_norm = float(max(np.abs(dtheta).max(), np.abs(db).max()))
-            if not math.isfinite(step_norm):
-                return (theta, b), SolverStatus.NOT_FINITE, it, step_norm
-            if step_norm <= self.tol:
-                status = SolverStatus.SUCCESS if pd else SolverStatus.UNSTABLE
-                return (theta + dtheta, b + db), status, it, step_norm
-            cap = max(np.abs(dtheta).max() / 0.5, np.abs(db).max() / 0.1, 1.0)
-            dtheta, db, slope = dtheta / cap, db / cap, slope / cap
-            if not slope < 0.0:
-                return (theta, b), SolverStatus.LINE_SEARCH_FAILED, it, step_norm
-            alpha = 1.0
-            while True:
-                trial = (theta + alpha * dtheta, b + alpha * db)
-                e_trial = self._energy(trial, pressure, force)
-                # Armijo; near the solution the energy change is below round-off.
-                if e_trial <= energy + 1e-4 * alpha * slope or \
-                        -slope <= 1e-13 * (abs(energy) + self._theta_scale):
-                    break
-                alpha *= 0.5
-                if alpha < 1e-10:
-                    return (theta, b), SolverStatus.LINE_SEARCH_FAILED, it, step_norm
-            theta, b = trial
-        return (theta, b), SolverStatus.MAX_ITERATIONS, self.max_iterations, step_norm
+    def node_jacobian(self, x, node):
+        """Tip position [m] and its derivatives in the engine unknowns, (2, n)."""
+        if node != self.tip_node:
+            raise ValueError(f'RodSolver takes loads at the tip (node {self.tip_node}), '
+                             f'got node {node}')
+        theta, b = self._unpack(x)
+        th, _ = self._point_fields(theta)
+        wt = self._weights
+        stretch = 1.0 + b[..., 0]
+        c, s = np.cos(th), np.sin(th)
+        tip = np.array([(wt * stretch * c).sum(), (wt * stretch * s).sum()])
+        jac = np.zeros((2, x.size))
+        for k, (dt, de) in enumerate(((-s, c), (c, s))):
+            jac[k, :self.n_theta - 1] = self._assemble(
+                np.stack([wt * stretch * dt, np.zeros_like(th)], axis=-1))[1:]
+            local = np.zeros(th.shape + (2,))
+            local[..., 0] = wt * de
+            jac[k, self.n_theta - 1:] = local.ravel()
+        return tip, jac
 
     # -- outputs ------------------------------------------------------------
     def _solve_local(self, th, kap, b0, force, types, pressure):
         """Pointwise (eps, c1) minimising W - (1 + eps) F . t at given theta, kappa."""
-        b = np.array(b0, dtype=float, copy=True)
-        for _ in range(30):
-            _, g, h, gf, _, _ = self._local(th, kap, b, pressure, force, types)
-            gb = np.stack([g[..., 0] - gf, g[..., 2]], axis=-1)
-            hbb = h[..., [[0], [2]], [0, 2]]
-            db = -np.linalg.solve(hbb, gb[..., None])[..., 0]
-            b += db
-            if np.abs(db).max() < 1e-15:
-                break
-        return b
+        problem = _PointwiseLocal(self, th, kap, force, types, pressure)
+        options = NewtonOptions(xtol=1e-15, max_step=0.1, energy_scale=self._theta_scale)
+        b = np.array(b0, dtype=float).reshape(-1, 2)
+        return engine.newton(problem, b, pressure, [], options).x.reshape(np.shape(b0))
 
     def _outputs(self, state, pressure, force):
         theta, b = state

@@ -4,6 +4,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from . import engine
+from .engine import NewtonOptions, SolverStatus
 from .materials import emc_energy_density, emc_stress, emc_stress_derivative
 
 __all__ = ['SectionLaw', 'build_section_law', 'rib_coverage', 'station_layout',
@@ -311,10 +313,43 @@ def station_layout(design, ribs='exact'):
     return np.array(breaks), np.array(types, dtype=int), law
 
 
+class _Section:
+    """One section type as a discretisation of the engine: unknowns (eps, kappa L_ref, c1)."""
+
+    # y = scale * x: kappa in units of 1/(0.1 m)
+    scale = np.array([1.0, 10.0, 1.0])
+
+    @staticmethod
+    def step(grad, hess):
+        """Newton step where H is positive definite, else a scaled gradient step."""
+        try:
+            np.linalg.cholesky(hess)
+        except np.linalg.LinAlgError:
+            # Mirrored eigenvalues can lead into the tension range where the quintic PEMC
+            # energy falls without bound; the gradient stays in the basin.
+            return -grad / np.abs(np.diag(hess)).max(), -1.0
+        return np.linalg.solve(hess, -grad), 1.0
+
+    def __init__(self, law, pressure_work, types):
+        self.law, self.pressure_work, self.types = law, pressure_work, types
+        self.gradient_scale = float(np.abs(law.stiffness[types]).max())
+
+    def flat(self):
+        return np.zeros(3)
+
+    def energy(self, x, pressure, loads):
+        return float(self.law.energy(x * self.scale, self.pressure_work, self.types))
+
+    def derivatives(self, x, pressure, loads):
+        w, g, h = self.law.derivatives(x * self.scale, self.pressure_work, self.types)
+        sc = self.scale
+        return float(w), g * sc, h * sc[:, None] * sc[None, :]
+
+
 def section_minimiser(law, pressure_work=0.0, types=0, initial=None, tol=1e-13,
                       max_iterations=60):
     """
-    Minimise W(eps, kappa, c1) of one section type by damped Newton.
+    Minimise W(eps, kappa, c1) of one section type with the engine's damped Newton.
 
     Parameters
     ----------
@@ -327,6 +362,7 @@ def section_minimiser(law, pressure_work=0.0, types=0, initial=None, tol=1e-13,
         Start; default the unstrained state.
     tol : float
         Largest final Newton step in (eps, kappa L_ref, c1), L_ref = 0.1 m [-].
+    max_iterations : int
 
     Returns
     -------
@@ -336,32 +372,9 @@ def section_minimiser(law, pressure_work=0.0, types=0, initial=None, tol=1e-13,
         Newton converged to a minimum (positive-definite Hessian).
 
     """
-    scale = np.array([1.0, 10.0, 1.0])   # kappa in units of 1/(0.1 m)
-    y = np.zeros(3) if initial is None else np.array(initial, dtype=float)
-    w, g, h = law.derivatives(y, pressure_work, types)
-    for _ in range(max_iterations):
-        hs = h * scale[:, None] * scale[None, :]
-        try:
-            np.linalg.cholesky(hs)
-            step = -np.linalg.solve(hs, g * scale) * scale
-        except np.linalg.LinAlgError:
-            step = -g * scale ** 2 / np.abs(np.diag(hs)).max()
-        rel = np.abs(step / scale)
-        if rel.max() > 0.2:
-            step *= 0.2 / rel.max()
-        alpha = 1.0
-        while True:
-            w_new = law.energy(y + alpha * step, pressure_work, types)
-            if w_new <= w + 1e-4 * alpha * (g @ step) or alpha < 1e-8 \
-                    or abs(alpha * g @ step) < 1e-15 * (abs(w) + 1.0):
-                break
-            alpha *= 0.5
-        y = y + alpha * step
-        w, g, h = law.derivatives(y, pressure_work, types)
-        if np.abs(alpha * step / scale).max() <= tol:
-            try:
-                np.linalg.cholesky(h * scale[:, None] * scale[None, :])
-                return y, True
-            except np.linalg.LinAlgError:
-                return y, False
-    return y, False
+    problem = _Section(law, pressure_work, types)
+    start = problem.flat() if initial is None else np.array(initial, dtype=float) / problem.scale
+    options = NewtonOptions(max_iterations=int(max_iterations), xtol=float(tol), max_step=0.2,
+                            flat_slope=1e-15, energy_scale=1.0)
+    out = engine.newton(problem, start, 0.0, [], options)
+    return out.x * problem.scale, out.status is SolverStatus.SUCCESS

@@ -1,15 +1,16 @@
 """CCM equilibrium solver: damped Newton with warm starts, continuation and rigidity."""
 
-import enum
 import functools
 import math
 
 import numpy as np
-from scipy.linalg import eigh
 
+from . import engine
 from .analysis import CircleFitted, flexural_rigidity
 from .design import ActuatorDesign
-from .energy import load_derivatives, load_energy, segment_derivatives, segment_energy
+from .energy import load_derivatives, load_energy, node_jacobian, segment_derivatives, \
+    segment_energy
+from .engine import linear_solve, linear_step, NewtonOptions, SolverStatus
 from .kinematics import (consistent_strain_map, from_scaled, midplane_samples, node_positions,
                          to_scaled)
 from .section import build_segments, uniform_edges
@@ -25,18 +26,6 @@ RECONSTRUCTIONS = ('paper', 'consistent')
 #: Largest Newton step in any scaled unknown; keeps iterates where the quintic PEMC
 #: energy (unbounded below at large tension) is meaningful.
 _MAX_STEP = 0.5
-_ARMIJO = 1e-4
-
-
-class SolverStatus(enum.IntEnum):
-    """Outcome of a solve; only SUCCESS has success=True."""
-
-    SUCCESS = 0
-    MAX_ITERATIONS = 1
-    LINE_SEARCH_FAILED = 2
-    NOT_FINITE = 3
-    UNSTABLE = 4
-    CONTINUATION_FAILED = 5
 
 
 _MESSAGES = {
@@ -298,6 +287,9 @@ class CCMSolver:
         self.xtol = float(xtol)
         # Axial stiffness of the stiffest segment [J]: the scale of gradients in q.
         self.gradient_scale = float(self.segments.stiffness[:, 0, 0].max())
+        self._options = NewtonOptions(max_iterations=self.max_iterations, gtol=self.gtol,
+                                      xtol=self.xtol, max_step=_MAX_STEP,
+                                      energy_scale=self.gradient_scale)
         self._params = (design.prestrain, design.emc_coefficients)
 
     # -- energy -----------------------------------------------------------
@@ -348,74 +340,25 @@ class CCMSolver:
                 loads.append((node, np.array([fx, fz])))
         return loads
 
-    # -- Newton -------------------------------------------------------------
-    def _newton_step(self, grad, hess):
-        """
-        Newton step, and whether the Hessian is positive definite.
+    # -- the discretisation's side of the engine ----------------------------------------
+    def flat(self):
+        """Return the flat, unstrained state in the scaled unknowns, shape (N, 4)."""
+        return np.zeros((self.n_segments, 4))
 
-        Where it is not, the eigenvalues are mirrored (|lambda|) so that the
-        step still descends; the sign of the smallest one is reported.
-        """
-        try:
-            np.linalg.cholesky(hess)
-            if hess.ndim == 3:
-                return -np.linalg.solve(hess, grad[:, :, None])[:, :, 0], 1.0
-            return -np.linalg.solve(hess, grad.ravel()).reshape(grad.shape), 1.0
-        except np.linalg.LinAlgError:
-            pass
-        if hess.ndim == 3:
-            lam, vec = np.linalg.eigh(hess)
-            min_eig = float(lam.min())
-            lam = np.maximum(np.abs(lam), 1e-8 * np.abs(lam).max(axis=1, keepdims=True))
-            coef = np.matmul(grad[:, None, :], vec)[:, 0, :] / lam
-            return -np.matmul(vec, coef[:, :, None])[:, :, 0], min_eig
-        lam, vec = eigh(hess, check_finite=False)
-        min_eig = float(lam.min())
-        lam = np.maximum(np.abs(lam), 1e-8 * np.abs(lam).max())
-        return -(vec @ ((vec.T @ grad.ravel()) / lam)).reshape(grad.shape), min_eig
+    def energy(self, q, pressure, loads):
+        """Total potential [J] at scaled unknowns `q`."""
+        return self._total_energy(q, pressure, loads)
 
-    def _newton(self, q, pressure, loads):
-        """Damped Newton from q; returns (q, status, iterations, grad, step, min_eig)."""
-        scale = self.gradient_scale
-        step_norm = math.inf
-        grad_rel = math.inf
-        energy, grad, hess = self._derivatives(q, pressure, loads)
-        for iteration in range(1, self.max_iterations + 1):
-            grad_rel = float(np.abs(grad).max()) / scale
-            if not (math.isfinite(energy) and math.isfinite(grad_rel)):
-                return q, SolverStatus.NOT_FINITE, iteration, grad_rel, step_norm, math.nan
-            step, min_eig = self._newton_step(grad, hess)
-            step_norm = float(np.abs(step).max())
-            if grad_rel <= self.gtol and step_norm <= self.xtol:
-                status = SolverStatus.SUCCESS if min_eig > 0.0 else SolverStatus.UNSTABLE
-                return q + step, status, iteration, grad_rel, step_norm, min_eig
-            if step_norm > _MAX_STEP:
-                step *= _MAX_STEP / step_norm
-            slope = float(np.vdot(grad, step))
-            if not slope < 0.0:
-                step, slope = -grad / scale, -float(np.vdot(grad, grad)) / scale
-            trial = q + step
-            e_trial, g_trial, h_trial = self._derivatives(trial, pressure, loads)
-            # Near the solution the energy change is below round-off: take full steps.
-            if e_trial <= energy + _ARMIJO * slope or -slope <= 1e-13 * (abs(energy) + scale):
-                q, energy, grad, hess = trial, e_trial, g_trial, h_trial
-                step_norm = float(np.abs(step).max())
-                continue
-            alpha = 0.5
-            while True:
-                trial = q + alpha * step
-                e_trial = self._total_energy(trial, pressure, loads)
-                if e_trial <= energy + _ARMIJO * alpha * slope:
-                    break
-                alpha *= 0.5
-                if alpha < 1e-10:
-                    return q, SolverStatus.LINE_SEARCH_FAILED, iteration, grad_rel, \
-                        step_norm, min_eig
-            q = trial
-            step_norm = alpha * float(np.abs(step).max())
-            energy, grad, hess = self._derivatives(q, pressure, loads)
-        return q, SolverStatus.MAX_ITERATIONS, self.max_iterations, grad_rel, step_norm, \
-            math.nan
+    def derivatives(self, q, pressure, loads):
+        """Energy [J], gradient (N, 4) and Hessian ((N, 4, 4) blocks, or dense when loaded)."""
+        return self._derivatives(q, pressure, loads)
+
+    step = staticmethod(linear_step)
+    solve_linear = staticmethod(linear_solve)
+
+    def node_jacobian(self, q, node):
+        """Position of a node [m] and its derivatives in the scaled unknowns, (2, N, 4)."""
+        return node_jacobian(q, self.segments.lengths, node)
 
     def _initial_state(self, initial):
         """Scaled warm start from a result or an (N, 4) SI array; None for a fresh solve."""
@@ -475,54 +418,9 @@ class CCMSolver:
         if np.shape(tip_force) != (2,):
             raise ValueError(f'`tip_force` must be (f0, p0) [N], got {tip_force!r}')
         loads = self._loads(tip_force, point_loads)
-        q0 = self._initial_state(initial)
-        spent = 0
-        if q0 is not None:
-            # A warm start only saves iterations: if it does not reach a stable equilibrium
-            # the solve starts again exactly as a fresh one, so the answer never depends on
-            # what was solved before.
-            q, status, its, grad, step, min_eig = self._newton(q0, pressure, loads)
-            if status is SolverStatus.SUCCESS:
-                return CCMResult(self, q, status, its, grad, step, pressure, loads,
-                                 tip_force, min_eig)
-            spent = its
-        flat = np.zeros((self.n_segments, 4))
-        q, status, its, grad, step, min_eig = self._newton(flat, pressure, loads)
-        spent += its
-        if status is SolverStatus.SUCCESS or status is SolverStatus.UNSTABLE:
-            return CCMResult(self, q, status, spent, grad, step, pressure, loads, tip_force,
-                             min_eig)
-        return self._continuation(flat, pressure, loads, tip_force, spent)
-
-    def _continuation(self, q0, pressure, loads, tip_force, spent):
-        """March pressure and loads from the unloaded flat state to the target."""
-        q, status, its, *_ = self._newton(q0, 0.0, [])
-        spent += its
-        if status is not SolverStatus.SUCCESS:
-            return CCMResult(self, q, SolverStatus.CONTINUATION_FAILED, spent, math.inf,
-                             math.inf, pressure, loads, tip_force, fraction=0.0)
-
-        def loading(lam):
-            return lam * pressure, [(n, lam * f) for n, f in loads]
-
-        lam, dlam = 0.0, 0.25
-        while lam < 1.0:
-            target = min(1.0, lam + dlam)
-            p, mixed = loading(target)
-            q_new, status, its, grad, step, min_eig = self._newton(q, p, mixed)
-            spent += its
-            if status is SolverStatus.SUCCESS:
-                q, lam = q_new, target
-                dlam = min(2.0 * dlam, 1.0)
-                if lam >= 1.0:
-                    return CCMResult(self, q, status, spent, grad, step, pressure, loads,
-                                     tip_force, min_eig)
-            else:
-                dlam *= 0.5
-                if dlam < 1.0 / 256:
-                    return CCMResult(self, q, SolverStatus.CONTINUATION_FAILED, spent, grad,
-                                     step, pressure, loads, tip_force, fraction=lam)
-        raise AssertionError('unreachable')  # pragma: no cover
+        out = engine.solve(self, pressure, loads, self._options, self._initial_state(initial))
+        return CCMResult(self, out.x, out.status, out.iterations, out.gradient, out.step,
+                         pressure, loads, tip_force, out.min_eig, out.fraction)
 
     # -- rigidity -----------------------------------------------------------
     def rigidity(self, pressure=0.0, axis='x', displacement=0.010, initial=None):
@@ -567,78 +465,21 @@ class CCMSolver:
             return RigidityResult(axis, delta, math.nan, math.nan, False,
                                   'unloaded solve failed: ' + unloaded.message, unloaded,
                                   None, unloaded.iterations)
-        q, force = unloaded.q.copy(), 0.0
-        start = unloaded.tip[k]
-        done, iterations, reached = 0.0, unloaded.iterations, 0.0
-        increment = 1.0
-        while done < 1.0:
-            goal = min(1.0, done + increment)
-            q_new, f_new, ok, its = self._bordered_newton(q, force, pressure, direction,
-                                                          start + goal * delta)
-            iterations += its
-            if ok:
-                q, force, done = q_new, f_new, goal
-                reached = goal
-                increment = min(1.0, 2.0 * increment)
-            else:
-                increment *= 0.5
-                if increment < 1.0 / 64:
-                    loaded = CCMResult(self, q, SolverStatus.CONTINUATION_FAILED, iterations,
-                                       math.inf, math.inf, pressure,
-                                       [(self.n_segments, force * direction)],
-                                       tuple(force * direction), fraction=reached)
-                    return RigidityResult(axis, delta, force, math.nan, False,
-                                          f'displacement control stalled at {reached:.1%} '
-                                          'of the displacement', unloaded, loaded, iterations)
-        loads = [(self.n_segments, force * direction)]
-        _, grad, hess = self._derivatives(q, pressure, loads)
-        try:
-            np.linalg.cholesky(hess)
-            stable = True
-        except np.linalg.LinAlgError:
-            stable = False
-        loaded = CCMResult(self, q, SolverStatus.SUCCESS, iterations,
-                           float(np.abs(grad).max()) / self.gradient_scale, 0.0, pressure,
-                           loads, tuple(force * direction))
+        out = engine.rigidity(self, unloaded.q, pressure, self.n_segments, direction, delta,
+                              self._options)
+        iterations = unloaded.iterations + out.iterations
+        loads = [(self.n_segments, out.force * direction)]
+        if not out.success:
+            loaded = CCMResult(self, out.x, SolverStatus.CONTINUATION_FAILED, iterations,
+                               math.inf, math.inf, pressure, loads, tuple(out.force * direction),
+                               fraction=out.fraction)
+            return RigidityResult(axis, delta, out.force, math.nan, False,
+                                  f'displacement control stalled at {out.fraction:.1%} '
+                                  'of the displacement', unloaded, loaded, iterations)
+        loaded = CCMResult(self, out.x, SolverStatus.SUCCESS, iterations, out.gradient, 0.0,
+                           pressure, loads, tuple(out.force * direction))
         lever = abs(loaded.tip[1 - k])
-        message = 'converged' + ('' if stable else
+        message = 'converged' + ('' if out.stable else
                                  ' (loaded state is unstable under force control)')
-        return RigidityResult(axis, delta, force, lever, True, message, unloaded, loaded,
+        return RigidityResult(axis, delta, out.force, lever, True, message, unloaded, loaded,
                               iterations)
-
-    def _bordered_newton(self, q, force, pressure, direction, target):
-        """Solve grad Pi_int - f grad(e . tip) = 0, e . tip = target, for (q, f)."""
-        n = self.n_segments
-        tip_node = self.n_segments
-        scale = self.gradient_scale
-        for iteration in range(1, self.max_iterations + 1):
-            _, g_int, h_int = self._derivatives(q, pressure, [])
-            e_dir, g_dir, h_dir = load_derivatives(q, self.segments.lengths,
-                                                   [(tip_node, direction)])
-            h = force * h_dir
-            idx = np.arange(n)
-            h.reshape(n, 4, n, 4)[idx, :, idx, :] += h_int
-            residual = (g_int + force * g_dir).ravel()
-            # The potential of a unit load along e is -e . tip.
-            gap = -e_dir - target
-            kkt = np.zeros((4 * n + 1, 4 * n + 1))
-            kkt[:-1, :-1] = h
-            kkt[:-1, -1] = kkt[-1, :-1] = g_dir.ravel()
-            # Linearised constraint: g_dir = -grad(e . tip), so g_dir . dq = gap.
-            rhs = np.concatenate([-residual, [gap]])
-            try:
-                sol = np.linalg.solve(kkt, rhs)
-            except np.linalg.LinAlgError:
-                return q, force, False, iteration
-            dq = sol[:-1].reshape(n, 4)
-            step = float(np.abs(dq).max())
-            if not np.all(np.isfinite(sol)):
-                return q, force, False, iteration
-            if step > _MAX_STEP:
-                return q, force, False, iteration
-            q = q + dq
-            force = force + sol[-1]
-            if (float(np.abs(residual).max()) / scale <= self.gtol and step <= self.xtol
-                    and abs(gap) <= 1e-12 * max(abs(target), 1e-3)):
-                return q, force, True, iteration
-        return q, force, False, self.max_iterations
