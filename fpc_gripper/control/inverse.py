@@ -25,6 +25,8 @@ _H_FORCE = 2.0e-3
 _CACHE_SIZE = 256
 #: Largest gap between the target and the achieved radius still called exact [m].
 _REACHED = 1.0e-9
+#: A residual this small is a root: the solves agree to round-off, some 1e-15 m [m].
+_ROUND_OFF = 1.0e-13
 
 
 class InverseStatus(enum.IntEnum):
@@ -429,7 +431,7 @@ class InverseModel:
                 guess, f_guess = moved, f(moved)
             else:
                 width = 2.0e3
-            if f_guess == 0.0:
+            if abs(f_guess) <= _ROUND_OFF:
                 return self._result(guess, InverseStatus.SUCCESS, start, target, tip_force,
                                     target)
             # Expand a bracket on the side the residual points to.
@@ -438,7 +440,7 @@ class InverseModel:
             while True:
                 b = float(np.clip(a + direction * width, 0.0, p_max))
                 fb = f(b)
-                if fb == 0.0 or (fb > 0.0) != (fa > 0.0):
+                if abs(fb) <= _ROUND_OFF or (fb > 0.0) != (fa > 0.0):
                     break
                 if b in (0.0, p_max):
                     status = (InverseStatus.BELOW_RANGE if b == 0.0
@@ -446,11 +448,12 @@ class InverseModel:
                     return self._result(b, status, start, target, tip_force, target + fb)
                 a, fa = b, fb
                 width *= 4.0
-            if fb == 0.0:
+            if abs(fb) <= _ROUND_OFF:
                 root = b
             else:
                 lo, hi = sorted((a, b))
-                root = brentq(f, lo, hi, xtol=self.xtol, rtol=4.0 * np.finfo(float).eps)
+                root = min(max(brentq(f, lo, hi, xtol=self.xtol, rtol=4.0 * np.finfo(float).eps),
+                               lo), hi)
             achieved = target + f(root)
         except _SolveFailed as failure:
             return self._failed(guess, start, target, tip_force, failure.pressure,
@@ -476,7 +479,8 @@ class InverseModel:
             # then jumps there by at most the model tolerance.
             message += (f'; the model changes discretisation there, so the radius is '
                         f'{achieved - target:+.2e} m off the target')
-        return InverseResult(x=float(pressure), success=status is InverseStatus.SUCCESS,
+        return InverseResult(x=min(max(float(pressure), 0.0), self.max_pressure),
+                             success=status is InverseStatus.SUCCESS,
                              status=status, message=message, nfev=self.nfev - start,
                              target=target, rho=float(achieved), tip_force=tip_force)
 

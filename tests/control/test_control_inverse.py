@@ -107,3 +107,15 @@ def test_non_monotone_range_is_refused():
 def test_bad_input_names_the_argument(model, call, word):
     with pytest.raises(ValueError, match=word):
         call(model)
+
+
+@pytest.mark.parametrize('prestrain', [0.15, 0.19195, 0.2421875])
+def test_the_ends_of_the_range_are_reached_exactly(prestrain):
+    """Targets at the map's ends return 0 Pa and max_pressure with success (no brentq error)."""
+    model = InverseModel(ActuatorDesign.paper(prestrain), PALM_RADIUS, 300e3)
+    low, high = model.rho_range
+    for target, pressure in ((low, 0.0), (high, 300e3)):
+        result = model.pressure_for_rho(target)
+        assert result.success, result.message
+        assert 0.0 <= result.x <= 300e3
+        assert result.x == pytest.approx(pressure, abs=1.0)
