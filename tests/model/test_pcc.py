@@ -5,8 +5,9 @@ import math
 import numpy as np
 import pytest
 
-from fpc_gripper.model import ActuatorDesign, ArcSolver, RodSolver, SolverStatus
-from fpc_gripper.model.pcc import half_angle_sinc, pcc_edges, PCCResult, PCCSolver
+from fpc_gripper.model import (ActuatorDesign, ArcSolver, PCCResult, PCCSolver, RodSolver,
+                               SolverStatus)
+from fpc_gripper.model.pcc import half_angle_sinc, pcc_edges
 from fpc_gripper.model.section_law import section_minimiser, station_layout
 
 PRESTRAINS = (0.15, 0.25, 0.40)
@@ -155,6 +156,29 @@ def test_step_and_linear_solve_are_the_banded_newton_systems():
     assert grad @ dx < 0.0                                   # the step descends
     rhs = np.random.default_rng(1).normal(size=x.size)
     np.testing.assert_allclose(dense @ solver.solve_linear(hess, rhs), rhs, atol=1e-8)
+
+
+def test_solve_through_indefinite_hessians(monkeypatch):
+    # 20 N of compression buckles the nearly flat finger: Newton from flat meets indefinite
+    # Hessians (shifted steps) and still finds the rod's buckled equilibrium.
+    from fpc_gripper.model import pcc
+    seen = []
+
+    def spy(*args, **kwargs):
+        out = eig_banded(*args, **kwargs)
+        seen.append(float(out[0]))
+        return out
+
+    eig_banded = pcc.eig_banded
+    monkeypatch.setattr(pcc, 'eig_banded', spy)
+    design = ActuatorDesign.paper(0.15)
+    result = PCCSolver(design, n_segments=64).solve(200e3, (-20.0, 0.0))
+    assert result.success, result.message
+    assert seen and max(seen) < 0.0
+    rod = RodSolver(design).solve(200e3, (-20.0, 0.0))
+    assert rod.success
+    assert np.linalg.norm(result.tip - rod.tip) < 2e-5
+    assert result.tip[0] < 0.0                             # buckled back past the clamp
 
 
 # -- limits: the exact arc ---------------------------------------------------------------
