@@ -245,7 +245,7 @@ def test_loaded_pcc_converges_to_the_rod_at_second_order(tip_errors, rod_tips):
     assert np.all(np.diff(worst) < 0.0)
     # Observed order over the doublings 32 -> 64 -> 128 -> 256: second.
     assert np.all((order[1:] > 1.8) & (order[1:] < 2.3)), order
-    # Worst of the scenes: below 0.05 mm from N = 32 (N = 24 suffices, see the report).
+    # Worst of the scenes: below 0.05 mm from N = 32 (N = 24 suffices: docs/physics.md 11.6).
     assert worst[0] > 5e-5 > worst[1]
     assert worst[-1] < 3e-7
     # Every scene, not only the worst, converges: the error at 256 is 64 times below 32.
