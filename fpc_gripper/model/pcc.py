@@ -7,6 +7,7 @@ from scipy.linalg import cho_solve_banded, cholesky_banded, eig_banded, LinAlgEr
 
 from .engine import NewtonOptions
 from .ladder import _check_common, _LadderSolver, LadderResult
+from .section import share_segments
 from .section_law import station_layout
 from .solver import PRESSURE_MODELS
 
@@ -74,17 +75,6 @@ def _horner(x, coefficients):
     return out
 
 
-def _share(spans, n):
-    """Segments per span, at least one each, n in all, as even in length as possible."""
-    counts = np.maximum(1, np.round(spans * (n / spans.sum()))).astype(int)
-    while counts.sum() > n:
-        # Take a segment where the lengths grow least, i.e. stay the shortest.
-        counts[np.argmin(np.where(counts > 1, spans / np.maximum(counts - 1, 1), np.inf))] -= 1
-    while counts.sum() < n:
-        counts[np.argmax(spans / counts)] += 1
-    return counts
-
-
 def pcc_edges(design, n_segments):
     """
     Segment edges of the PCC rod: every section change, then about N segments in all.
@@ -111,7 +101,7 @@ def pcc_edges(design, n_segments):
 
     """
     breaks, types, law = station_layout(design, ribs='exact')
-    counts = _share(np.diff(breaks), max(int(n_segments), types.size))
+    counts = share_segments(np.diff(breaks), max(int(n_segments), types.size))
     edges = np.concatenate([*(np.linspace(a, b, c + 1)[:-1]
                               for a, b, c in zip(breaks, breaks[1:], counts)), breaks[-1:]])
     return edges, np.repeat(types, counts), law

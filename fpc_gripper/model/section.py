@@ -5,7 +5,7 @@ import functools
 
 import numpy as np
 
-__all__ = ['SegmentData', 'build_segments', 'uniform_edges']
+__all__ = ['SegmentData', 'build_segments', 'share_segments', 'uniform_edges']
 
 # Gauss-Legendre rules exact for the PEMC integrand: degree 10 in x, 5 in z (SPEC "Energy").
 _GL_X = np.polynomial.legendre.leggauss(6)
@@ -77,6 +77,32 @@ class SegmentData:
         return self.lengths.size
 
 
+def share_segments(spans, n):
+    """
+    Segments per span, at least one each and `n` in all, as even in length as possible.
+
+    Parameters
+    ----------
+    spans : ndarray, shape (K,)
+        Span lengths [m].
+    n : int
+        Total segments, >= K.
+
+    Returns
+    -------
+    ndarray of int, shape (K,)
+
+    """
+    spans = np.asarray(spans, dtype=float)
+    counts = np.maximum(1, np.round(spans * (n / spans.sum()))).astype(int)
+    while counts.sum() > n:
+        # Take a segment where the lengths grow least, so that they stay the shortest.
+        counts[np.argmin(np.where(counts > 1, spans / np.maximum(counts - 1, 1), np.inf))] -= 1
+    while counts.sum() < n:
+        counts[np.argmax(spans / counts)] += 1
+    return counts
+
+
 def uniform_edges(length, n_segments, load_points=()):
     """
     Segment edges: n_segments equal parts, split so that every load point is an edge.
@@ -103,11 +129,7 @@ def uniform_edges(length, n_segments, load_points=()):
                          f'point, got {n_segments}')
     # Segmentize before and after each load point separately (paper, Section III-D),
     # sharing the segments in proportion to the spans.
-    counts = np.maximum(1, np.round(spans / length * n_segments).astype(int))
-    while counts.sum() > n_segments:
-        counts[np.argmax(np.where(counts > 1, spans / counts, -1.0))] -= 1
-    while counts.sum() < n_segments:
-        counts[np.argmax(spans / counts)] += 1
+    counts = share_segments(spans, n_segments)
     edges = [np.linspace(a, b, c + 1)[:-1] for a, b, c in zip(breaks, breaks[1:], counts)]
     return np.concatenate([*edges, [float(length)]])
 
