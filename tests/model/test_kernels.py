@@ -164,14 +164,17 @@ def _check_step(solver, grad, hess):
 
 
 def test_newton_step_equals_numpy(states):
-    # Blocks (unloaded), dense (loaded), and each shifted to be indefinite.
+    # Blocks (unloaded), dense (loaded), each shifted to be indefinite, and shifted onto
+    # an eigenvalue: singular, so that the floor of |lambda| sets the step.
     paths = set()
     for solver, q, pressure, loads in states:
         _, grad, hess = solver._derivatives(q, pressure, loads)
         paths.add((hess.ndim, _check_step(solver, grad, hess)))
         lam = np.linalg.eigvalsh(hess)
-        shift = np.median(lam) * np.eye(hess.shape[-1])
-        paths.add((hess.ndim, _check_step(solver, grad, hess - shift)))
+        eye = np.eye(hess.shape[-1])
+        paths.add((hess.ndim, _check_step(solver, grad, hess - np.median(lam) * eye)))
+        singular = hess - (lam[..., 1, None, None] if hess.ndim == 3 else lam[1]) * eye
+        assert not _check_step(solver, grad + 1e-3 * solver.gradient_scale, singular)
     assert paths == {(3, True), (3, False), (2, True), (2, False)}
 
 
@@ -208,6 +211,24 @@ def test_compiled_derivatives_match_finite_differences(states):
         np.testing.assert_allclose(grad, g_fd, rtol=1e-6, atol=1e-7 * np.abs(grad).max())
         np.testing.assert_allclose(hess, h_fd, rtol=1e-6, atol=1e-7 * np.abs(hess).max())
         np.testing.assert_allclose(hess, hess.T, rtol=0, atol=1e-12 * np.abs(hess).max())
+
+
+def test_compiled_load_derivatives_match_finite_differences(states):
+    # On their own scale: beside the segments' stiffness a load term would hide in atol.
+    for solver, q, _, loads in states[3::4]:
+        n, lengths = solver.n_segments, solver.segments.lengths
+        x = q.ravel()
+        _, grad, hess = kernels.load_derivatives(q, lengths, loads)
+        g_fd = approx_derivative(
+            lambda y: kernels.load_energy(y.reshape(n, 4), lengths, loads), x,
+            method='3-point', abs_step=1e-6)
+        h_fd = approx_derivative(
+            lambda y: kernels.load_derivatives(y.reshape(n, 4), lengths, loads)[1].ravel(), x,
+            method='3-point', abs_step=1e-6)
+        # One segment's load Hessian is zero: p_0 is linear in q_0 and theta_0 = 0.
+        scale = max(np.abs(hess).max(), np.abs(grad).max())
+        np.testing.assert_allclose(grad.ravel(), g_fd, rtol=1e-6, atol=1e-8 * scale)
+        np.testing.assert_allclose(hess, h_fd, rtol=1e-6, atol=1e-8 * scale)
 
 
 def test_compiled_strain_map_derivatives_match_finite_differences(states):
