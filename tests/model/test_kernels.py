@@ -114,6 +114,9 @@ def test_load_kernels_equal_numpy(states):
             assert compiled[0] == 0.0 and kernels.load_energy(q, lengths, loads) == 0.0
             assert not compiled[1].any() and not compiled[2].any()
             assert compiled[2].shape == original[2].shape
+            direct = kernels.load_derivatives_kernel(q, lengths, *kernels.load_arrays(loads))
+            assert direct[0] == 0.0 and not direct[1].any() and not direct[2].any()
+            assert direct[2].shape == original[2].shape
             continue
         # The energy scale: each load's |F| times the finger length.
         scale = sum(np.abs(f).sum() for _, f in loads) * lengths.sum()
