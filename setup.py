@@ -16,7 +16,7 @@ setup(
         ('share/' + package_name, ['package.xml']),
         ('share/' + package_name + '/msg_configs', glob('msg_configs/*.yaml')),
     ],
-    install_requires=['setuptools', 'numpy', 'scipy', 'PyYAML'],
+    install_requires=['setuptools', 'numpy', 'scipy', 'numba', 'PyYAML'],
     zip_safe=True,
     maintainer='fpc_gripper developers',
     maintainer_email='dev@fpc-gripper.invalid',
