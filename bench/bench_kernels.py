@@ -13,7 +13,9 @@ import timeit
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 from timing import machine  # noqa: E402
 
-from fpc_gripper.model import ActuatorDesign, CCMSolver, energy, kernels, kinematics  # noqa: E402
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / 'tests' / 'model'))
+import ccm_reference as reference  # noqa: E402, I100 (the numpy formulas the kernels replaced)
+from fpc_gripper.model import ActuatorDesign, CCMSolver, kernels  # noqa: E402, I100, I201
 
 RESULTS = pathlib.Path(__file__).resolve().parent / 'results' / 'kernels.json'
 PRESTRAIN, PRESSURE, N_SEGMENTS = 0.25, 100e3, 8
@@ -68,17 +70,17 @@ def call_times(repeats):
         q, loads = result.q, list(result.point_loads)
         _, grad, hess = solver._derivatives(q, PRESSURE, loads)
         pairs = {
-            'segment_energy': (lambda: energy.segment_energy(q, seg, *params),
+            'segment_energy': (lambda: reference.segment_energy(q, seg, *params),
                                lambda: kernels.segment_energy(q, seg, *params)),
-            'segment_derivatives': (lambda: energy.segment_derivatives(q, seg, *params),
+            'segment_derivatives': (lambda: reference.segment_derivatives(q, seg, *params),
                                     lambda: kernels.segment_derivatives(q, seg, *params)),
-            'load_energy': (lambda: energy.load_energy(q, lengths, loads),
+            'load_energy': (lambda: reference.load_energy(q, lengths, loads),
                             lambda: kernels.load_energy(q, lengths, loads)),
-            'load_derivatives': (lambda: energy.load_derivatives(q, lengths, loads),
+            'load_derivatives': (lambda: reference.load_derivatives(q, lengths, loads),
                                  lambda: kernels.load_derivatives(q, lengths, loads)),
-            'node_positions': (lambda: kinematics.node_positions(q, lengths),
+            'node_positions': (lambda: reference.node_positions(q, lengths),
                                lambda: kernels.node_positions(q, lengths)),
-            'consistent_strain_map': (lambda: kinematics.consistent_strain_map(q),
+            'consistent_strain_map': (lambda: reference.consistent_strain_map(q),
                                       lambda: kernels.consistent_strain_map(q)),
             'newton_step': (lambda: solver._newton_step(grad, hess),
                             lambda: kernels.newton_step(grad, hess)),

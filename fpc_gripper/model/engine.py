@@ -5,7 +5,8 @@ import enum
 import math
 
 import numpy as np
-from scipy.linalg import eigh
+
+from . import kernels
 
 __all__ = ['SolverStatus', 'NewtonOptions', 'NewtonOutcome', 'newton', 'solve', 'rigidity',
            'linear_step', 'linear_solve', 'BorderedOutcome']
@@ -76,25 +77,10 @@ def linear_step(grad, hess, floor=1e-8):
 
     Where H is not positive definite its eigenvalues are mirrored (|lambda|, floored at
     `floor` times the largest) so that the step still descends; the smallest eigenvalue
-    is returned. H is dense (n, n) for a flat g, or (N, m, m) blocks for g of shape (N, m).
+    is returned. H is dense (n, n), or (N, m, m) blocks for g of shape (N, m). Compiled
+    (`kernels.newton_step`).
     """
-    try:
-        np.linalg.cholesky(hess)
-        if hess.ndim == 3:
-            return -np.linalg.solve(hess, grad[:, :, None])[:, :, 0], 1.0
-        return -np.linalg.solve(hess, grad.ravel()).reshape(grad.shape), 1.0
-    except np.linalg.LinAlgError:
-        pass
-    if hess.ndim == 3:
-        lam, vec = np.linalg.eigh(hess)
-        min_eig = float(lam.min())
-        lam = np.maximum(np.abs(lam), floor * np.abs(lam).max(axis=1, keepdims=True))
-        coef = np.matmul(grad[:, None, :], vec)[:, 0, :] / lam
-        return -np.matmul(vec, coef[:, :, None])[:, :, 0], min_eig
-    lam, vec = eigh(hess, check_finite=False)
-    min_eig = float(lam.min())
-    lam = np.maximum(np.abs(lam), floor * np.abs(lam).max())
-    return -(vec @ ((vec.T @ grad.ravel()) / lam)).reshape(grad.shape), min_eig
+    return kernels.newton_step(grad, hess, floor)
 
 
 def linear_solve(hess, rhs):

@@ -1,14 +1,14 @@
 """Compiled (numba) drop-in equivalents of the CCM energy, kinematics and Newton step."""
 
+import functools
 import math
 
 import numba
 import numpy as np
 
-from .energy import _law_matrix
-
 __all__ = ['segment_energy', 'segment_derivatives', 'load_energy', 'load_derivatives',
-           'load_arrays', 'consistent_strain_map', 'node_positions', 'end_rotation',
+           'beta_derivatives', 'load_arrays', 'consistent_strain_map', 'node_positions',
+           'end_rotation',
            'newton_step', 'segment_energy_kernel', 'segment_derivatives_kernel',
            'load_energy_kernel', 'load_derivatives_kernel', 'consistent_strain_map_kernel',
            'node_positions_kernel', 'end_rotation_kernel', 'newton_step_blocks',
@@ -23,6 +23,39 @@ EIGEN_FLOOR = 1e-8
 _PRODUCT_LAW = (0, 1, 1, 1, 2, 2, 2, 2, 2, 2)
 _PAIR_A = (0, 0, 0, 1, 1, 2)
 _PAIR_B = (0, 1, 2, 1, 2, 2)
+
+
+@functools.lru_cache(maxsize=16)
+def _law_matrix(emc):
+    """Map strain powers s^0..s^5 to (F, sigma, sigma') of the PEMC law, shape (6, 3)."""
+    a1, a2, a3, a4 = emc
+    return np.array([[0.0, 0.0, a4],
+                     [0.0, a4, 2.0 * a3],
+                     [a4 / 2.0, a3, 3.0 * a2],
+                     [a3 / 3.0, a2, 4.0 * a1],
+                     [a2 / 4.0, a1, 0.0],
+                     [a1 / 5.0, 0.0, 0.0]])
+
+
+# beta = atan2(b, a) with a = 1 + q0 + 3 q1 and b = 2 q3: the constant da/dq, db/dq.
+_DA = np.array([1.0, 3.0, 0.0, 0.0])
+_DB = np.array([0.0, 0.0, 0.0, 2.0])
+_DADB = np.stack([_DA, _DB])
+# Second-derivative patterns: da da^T - db db^T and da db^T + db da^T.
+_OUTER_DIFF = np.outer(_DA, _DA) - np.outer(_DB, _DB)
+_OUTER_MIX = np.outer(_DA, _DB) + np.outer(_DB, _DA)
+
+
+def beta_derivatives(q):
+    """First and second derivatives of beta_i in q_i, shapes (N, 4) and (N, 4, 4)."""
+    a = 1.0 + q[:, 0] + 3.0 * q[:, 1]
+    b = 2.0 * q[:, 3]
+    r2 = a * a + b * b
+    grad = np.stack([-b / r2, a / r2], axis=1) @ _DADB
+    r4 = r2 * r2
+    hess = ((2.0 * a * b / r4)[:, None, None] * _OUTER_DIFF
+            + ((b * b - a * a) / r4)[:, None, None] * _OUTER_MIX)
+    return grad, hess
 
 
 # -- segments -----------------------------------------------------------------------------
@@ -585,35 +618,35 @@ def _mirrored_solve(lam, vec, rhs, floor, out):
 
 
 @_jit
-def newton_step_blocks(grad, hess):
+def newton_step_blocks(grad, hess, floor):
     """
     Newton step for a block-diagonal Hessian, compiled.
 
     Where every block is positive definite, the step solves each block by
     Cholesky. Otherwise the eigenvalues of every block are mirrored (|lambda|,
-    floored at EIGEN_FLOOR times the block's largest) so that the step still
-    descends.
+    floored at `floor` times the block's largest) so that the step still descends.
 
     Parameters
     ----------
-    grad : ndarray, shape (N, 4)
-    hess : ndarray, shape (N, 4, 4)
+    grad : ndarray, shape (N, m)
+    hess : ndarray, shape (N, m, m)
+    floor : float
 
     Returns
     -------
-    step : ndarray, shape (N, 4)
+    step : ndarray, shape (N, m)
     min_eig : float
         1.0 when every block is positive definite, else the smallest eigenvalue.
 
     """
-    n = grad.shape[0]
-    step = np.empty((n, 4))
-    low = np.empty((4, 4))
-    rhs = np.empty(4)
-    out = np.empty(4)
+    n, m = grad.shape
+    step = np.empty((n, m))
+    low = np.empty((m, m))
+    rhs = np.empty(m)
+    out = np.empty(m)
     definite = True
     for i in range(n):
-        for a in range(4):
+        for a in range(m):
             rhs[a] = -grad[i, a]
         if not _cholesky_factor(hess[i], low):
             definite = False
@@ -626,57 +659,69 @@ def newton_step_blocks(grad, hess):
     for i in range(n):
         lam, vec = np.linalg.eigh(hess[i])
         min_eig = min(min_eig, lam.min())
-        for a in range(4):
+        for a in range(m):
             rhs[a] = -grad[i, a]
-        _mirrored_solve(lam, vec, rhs, EIGEN_FLOOR * np.abs(lam).max(), out)
+        _mirrored_solve(lam, vec, rhs, floor * np.abs(lam).max(), out)
         step[i] = out
     return step, min_eig
 
 
 @_jit
-def newton_step_dense(grad, hess):
+def newton_step_dense(grad, hess, floor):
     """
     Newton step for a dense Hessian, compiled: Cholesky, else mirrored eigenvalues.
 
     Parameters
     ----------
-    grad : ndarray, shape (N, 4)
-    hess : ndarray, shape (4 N, 4 N)
+    grad : ndarray, shape (n,)
+    hess : ndarray, shape (n, n)
+    floor : float
+        Mirrored eigenvalues are floored at this times the largest |lambda|.
 
     Returns
     -------
-    step : ndarray, shape (N, 4)
+    step : ndarray, shape (n,)
     min_eig : float
         1.0 when the Hessian is positive definite, else its smallest eigenvalue.
 
     """
     n = hess.shape[0]
-    rhs = np.empty(n)
-    for i in range(grad.shape[0]):
-        for a in range(4):
-            rhs[4 * i + a] = -grad[i, a]
+    rhs = -grad
     out = np.empty(n)
     # A 4 N system is large enough that LAPACK's blocked factorisation beats loops.
     low, definite = _dense_cholesky(hess)
     if definite:
         _cholesky_substitute(low, rhs, out)
-        return out.reshape(grad.shape), 1.0
+        return out, 1.0
     lam, vec = np.linalg.eigh(hess)
-    _mirrored_solve(lam, vec, rhs, EIGEN_FLOOR * np.abs(lam).max(), out)
-    return out.reshape(grad.shape), lam.min()
+    _mirrored_solve(lam, vec, rhs, floor * np.abs(lam).max(), out)
+    return out, lam.min()
 
 
-def newton_step(grad, hess):
+def newton_step(grad, hess, floor=EIGEN_FLOOR):
     """
-    Compiled `CCMSolver._newton_step`: (step (N, 4), min_eig or 1.0 when PD).
+    Newton step -H^-1 g, and the smallest eigenvalue (1.0 when H is positive definite).
+
+    Where H is not positive definite its eigenvalues are mirrored (|lambda|, floored at
+    `floor` times the largest) so that the step still descends.
 
     Parameters
     ----------
-    grad : ndarray, shape (N, 4)
-    hess : ndarray, shape (N, 4, 4) or (4 N, 4 N)
+    grad : ndarray
+        (N, m) for a block Hessian; any shape for a dense one.
+    hess : ndarray, shape (N, m, m) or (n, n)
         Block-diagonal or dense Hessian.
+    floor : float
+
+    Returns
+    -------
+    step : ndarray, shape of `grad`
+    min_eig : float
 
     """
+    grad = np.ascontiguousarray(grad, dtype=float)
+    hess = np.ascontiguousarray(hess, dtype=float)
     if hess.ndim == 3:
-        return newton_step_blocks(grad, hess)
-    return newton_step_dense(grad, hess)
+        return newton_step_blocks(grad, hess, float(floor))
+    step, min_eig = newton_step_dense(grad.ravel(), hess, float(floor))
+    return step.reshape(grad.shape), min_eig

@@ -2,8 +2,10 @@
 
 import numpy as np
 
+from . import kernels
+
 __all__ = ['to_scaled', 'from_scaled', 'end_rotation', 'node_positions', 'midplane_samples',
-           'rotation_sum', 'consistent_strain_map', 'consistent_from_strain']
+           'consistent_strain_map', 'consistent_from_strain']
 
 # q = (b1, b3 L^2, c1, d L) is dimensionless; these columns take it to SI and back.
 _B3, _D = 1, 3
@@ -27,48 +29,31 @@ def from_scaled(q, lengths):
 
 def end_rotation(q):
     """
-    End rotation of each segment, beta_i = atan2(2 d L_i, 1 + b1 + 3 b3 L_i^2) [rad].
+    End rotation beta_i = atan2(2 q3, 1 + q0 + 3 q1) of every segment [rad] (compiled).
 
     References
     ----------
-    Zhou, Headings, Dapino (2022), eq. (16), with SPEC's erratum (no stray L_i);
-    docs/physics.md, section 4.
+    Zhou, Headings, Dapino (2022), eq. (16) without its stray L_i (SPEC erratum).
 
     """
-    return np.arctan2(2.0 * q[:, 3], 1.0 + q[:, 0] + 3.0 * q[:, 1])
-
-
-def rotation_sum(beta):
-    """Node angles theta_i = sum_{k<i} beta_k, theta_1 = 0 (eq. 1) [rad], shape (N,)."""
-    theta = np.empty_like(beta)
-    theta[0] = 0.0
-    np.cumsum(beta[:-1], out=theta[1:])
-    return theta
+    return kernels.end_rotation(q)
 
 
 def node_positions(q, lengths):
     """
-    Global (X, Z) of every node O_1..O_{N+1} by eq. (15).
+    Chain nodes O_i (eq. 15), cumulative rotations theta_i and end rotations beta_i (compiled).
 
     Returns
     -------
     nodes : ndarray, shape (N + 1, 2)
-        Node positions [m]; nodes[-1] is the tip.
+        [m].
     theta : ndarray, shape (N,)
-        Node angles [rad].
+        Rotation of each segment's local frame [rad].
     beta : ndarray, shape (N,)
         End rotations [rad].
 
     """
-    beta = end_rotation(q)
-    theta = rotation_sum(beta)
-    u = lengths * (1.0 + q[:, 0] + q[:, 1])
-    w = lengths * q[:, 3]
-    c, s = np.cos(theta), np.sin(theta)
-    nodes = np.zeros((q.shape[0] + 1, 2))
-    np.cumsum(c * u - s * w, out=nodes[1:, 0])
-    np.cumsum(s * u + c * w, out=nodes[1:, 1])
-    return nodes, theta, beta
+    return kernels.node_positions(q, lengths)
 
 
 def midplane_samples(q, lengths, per_segment=16):
@@ -137,26 +122,7 @@ def consistent_strain_map(q):
     docs/physics.md, section 11.1; docs/model_notes.md, "CCM reconstruction vs rod".
 
     """
-    n = q.shape[0]
-    stretch = 1.0 + q[:, 0] + 3.0 * q[:, 1]
-    inv = 1.0 / stretch
-    qs = np.empty((n, 4))
-    qs[:, 0] = q[:, 0] + 3.0 * q[:, 1]
-    qs[:, 1] = -2.0 * q[:, 1]
-    qs[:, 2] = q[:, 2]
-    qs[:, _D] = q[:, _D] * inv
-    jac = np.zeros((n, 4, 4))
-    jac[:, 0, 0] = jac[:, 2, 2] = 1.0
-    jac[:, 0, 1] = 3.0
-    jac[:, 1, 1] = -2.0
-    jac[:, _D, 0] = -q[:, _D] * inv * inv
-    jac[:, _D, 1] = -3.0 * q[:, _D] * inv * inv
-    jac[:, _D, _D] = inv
-    a = np.array([1.0, 3.0, 0.0, 0.0])
-    e3 = np.array([0.0, 0.0, 0.0, 1.0])
-    hess3 = ((2.0 * q[:, _D] * inv ** 3)[:, None, None] * np.outer(a, a)
-             - (inv * inv)[:, None, None] * (np.outer(a, e3) + np.outer(e3, a)))
-    return qs, jac, hess3
+    return kernels.consistent_strain_map(q)
 
 
 def consistent_from_strain(qs):
