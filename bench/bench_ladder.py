@@ -34,12 +34,13 @@ import numpy as np  # noqa: E402
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from fpc_gripper.model import ActuatorDesign, ArcSolver, CCMSolver, RodSolver  # noqa: E402
+from fpc_gripper.model import ActuatorDesign, ArcSolver, CCMSolver, PCCSolver, RodSolver  # noqa: E402,E501
 from fpc_gripper.model.selection import aligned_edges  # noqa: E402
 
 PRESTRAINS = (0.15, 0.25, 0.40)
 N_VALUES = (1, 2, 3, 4, 6, 8, 12, 16, 32)
 N_ALIGNED = (22, 32, 44, 64)
+N_PCC = (22, 24, 32, 48, 64)
 TURNING_BINS = (0.5, 1.0, 1.5, 2.0, 2.5, 3.0, 3.5, 4.0, 5.0, 6.5)   # upper edges [rad]
 LOAD_BINS = (0.0, 0.5, 1.0)                                        # upper edges [N]
 SAFETY = 1.5
@@ -77,6 +78,8 @@ def models():
         out.append(('ccm_aligned', n,
                     lambda d, n=n: CCMSolver(d, segment_edges=aligned_edges(d, n),
                                              reconstruction='consistent')))
+    for n in N_PCC:
+        out.append(('pcc', n, lambda d, n=n: PCCSolver(d, n_segments=n)))
     out.append(('rod', 0, lambda d: RodSolver(d)))
     return out
 
@@ -324,10 +327,11 @@ def plot(summary, front, path):
     import matplotlib.pyplot as plt
     fig, ax = plt.subplots(figsize=(7.5, 5.0))
     styles = {'arc': ('s', 'C3'), 'ccm': ('o', 'C0'), 'ccm_consistent': ('^', 'C2'),
-              'ccm_aligned': ('D', 'C1'), 'rod': ('*', 'k')}
+              'ccm_aligned': ('D', 'C1'), 'pcc': ('P', 'C4'), 'rod': ('*', 'k')}
     labels = {'arc': 'arc (rung a)', 'ccm': 'CCM-N, paper reconstruction',
               'ccm_consistent': 'CCM-N, consistent reconstruction',
               'ccm_aligned': 'CCM-N, consistent, edges on rib edges',
+              'pcc': 'PCC-N: exact arcs between section changes',
               'rod': 'rod (reference; own error < 1e-10 m)'}
     floor = ROD_ERROR
     for rung, (marker, color) in styles.items():

@@ -14,7 +14,7 @@ __all__ = ['DEFAULT_TOLERANCE', 'DEFAULT_N_SEGMENTS', 'MAX_SEGMENTS', 'ModelSett
            'finger_model', 'model_label']
 
 #: Default tip-position tolerance against the geometrically exact rod [m].
-DEFAULT_TOLERANCE = 0.5e-3
+DEFAULT_TOLERANCE = 5e-5
 #: Segments of the fixed paper CCM that tolerance 0 selects.
 DEFAULT_N_SEGMENTS = 8
 #: Largest fixed N a setting may ask for.

@@ -11,6 +11,7 @@ from scipy.interpolate import PchipInterpolator
 
 from .design import ActuatorDesign
 from .ladder import ArcSolver, RodSolver
+from .pcc import PCCSolver
 from .section import uniform_edges
 from .section_law import station_layout
 from .solver import CCMSolver, PRESSURE_MODELS
@@ -21,8 +22,9 @@ __all__ = ['Scene', 'ModelChoice', 'RUNGS', 'choose_model', 'load_error_model', 
 
 #: Rungs of the ladder: uniform arc (a), CCM with the paper's reconstruction, CCM with the
 #: consistent reconstruction (uniform segments, or 'ccm_aligned': segment edges on every
-#: section change -- rib edges and channel end), geometrically exact rod (d).
-RUNGS = ('arc', 'ccm', 'ccm_consistent', 'ccm_aligned', 'rod')
+#: section change -- rib edges and channel end), the piecewise-constant-strain rod ('pcc',
+#: exact arcs between the section changes) and the geometrically exact rod (d).
+RUNGS = ('arc', 'ccm', 'ccm_consistent', 'ccm_aligned', 'pcc', 'rod')
 _DATA = pathlib.Path(__file__).resolve().parents[1] / 'data' / 'error_model.json'
 
 
@@ -111,7 +113,7 @@ def make_solver(rung, n_segments, design, pressure_model='adiabatic'):
     rung : str
         One of `RUNGS`.
     n_segments : int
-        CCM segments (ignored by the arc and the rod).
+        Segments of the CCM and PCC rungs (ignored by the arc and the rod).
     design : ActuatorDesign
     pressure_model : {'adiabatic', 'isobaric'}
 
@@ -126,6 +128,8 @@ def make_solver(rung, n_segments, design, pressure_model='adiabatic'):
     if rung == 'ccm_aligned':
         return CCMSolver(design, segment_edges=aligned_edges(design, n_segments),
                          pressure_model=pressure_model, reconstruction='consistent')
+    if rung == 'pcc':
+        return PCCSolver(design, n_segments=int(n_segments), pressure_model=pressure_model)
     if rung == 'rod':
         return RodSolver(design, pressure_model=pressure_model)
     raise ValueError(f'`rung` must be one of {RUNGS}, got {rung!r}')

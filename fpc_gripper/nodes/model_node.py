@@ -483,20 +483,24 @@ class ModelNode(Node):
 
 
 def main(args=None):
-    """Run the model node until shutdown."""
+    """Run the model node until shutdown; 0 on SIGINT or shutdown, 1 on a bad start."""
     rclpy.init(args=args)
+    node = None
     try:
         node = ModelNode()
+        rclpy.spin(node)
     except (ValueError, ParameterException) as exc:
         get_logger('model_node').fatal(f'cannot start: {exc}')
-        rclpy.try_shutdown()
         return 1
-    try:
-        rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
+        # Also during start-up: a Ctrl-C while the node is being built is a clean stop.
         pass
     finally:
-        node.destroy_node()
+        try:
+            if node is not None:
+                node.destroy_node()
+        except KeyboardInterrupt:
+            pass
         rclpy.try_shutdown()
     return 0
 

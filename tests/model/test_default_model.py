@@ -1,0 +1,70 @@
+"""The default finger model lands within its tolerance of the converged rod, scene by scene."""
+
+import itertools
+
+import numpy as np
+import pytest
+
+from fpc_gripper.model import ActuatorDesign, AdaptiveSolver, RodSolver
+from fpc_gripper.model.pipeline import DEFAULT_TOLERANCE, finger_model, ModelSettings
+
+PRESTRAINS = (0.15, 0.25, 0.40)
+
+
+def ladder_scenes():
+    """The 87 scenes of bench/bench_ladder.py: unloaded, and tip loads along X and Z."""
+    out = [(e, p, (0.0, 0.0)) for e in PRESTRAINS for p in (0.0, 100e3, 200e3, 300e3, 400e3)]
+    for e, p, f in itertools.product(PRESTRAINS, (0.0, 200e3, 400e3), (-1.0, -0.5, 0.5, 1.0)):
+        out += [(e, p, (f, 0.0)), (e, p, (0.0, f))]
+    return out
+
+
+def other_scenes():
+    """Scenes off the ladder's grid: other prestrains, pressures, loads and channel widths."""
+    rng = np.random.default_rng(20261201)
+    out = []
+    for _ in range(24):
+        prestrain = float(rng.uniform(0.15, 0.40))
+        pressure = float(rng.uniform(0.0, 400e3))
+        angle = float(rng.uniform(0.0, 2.0 * np.pi))
+        load = float(rng.uniform(0.0, 1.0)) if rng.random() < 0.8 else 0.0
+        width = (0.024, 0.026, 0.028)[int(rng.integers(3))]
+        out.append((prestrain, pressure, (load * np.cos(angle), load * np.sin(angle)), width))
+    return out
+
+
+@pytest.fixture(scope='module')
+def designs():
+    cache = {}
+
+    def get(prestrain, width=None):
+        key = (prestrain, width)
+        if key not in cache:
+            design = ActuatorDesign.paper(prestrain=prestrain)
+            cache[key] = design if width is None else design.replace(Cy=width)
+        return cache[key]
+    return get
+
+
+def test_the_default_tolerance_is_rod_accuracy():
+    assert DEFAULT_TOLERANCE == 5e-5            # SPEC: model_node runs 0.05 mm by default
+    assert isinstance(finger_model(ActuatorDesign.paper(0.25), ModelSettings()), AdaptiveSolver)
+
+
+@pytest.mark.parametrize('prestrain, pressure, force', ladder_scenes())
+def test_default_model_meets_its_tolerance_on_the_ladder(designs, prestrain, pressure, force):
+    design = designs(prestrain)
+    result = finger_model(design, ModelSettings()).solve(pressure, force)
+    rod = RodSolver(design).solve(pressure, force)
+    assert result.success and rod.success, (result.message, rod.message)
+    assert np.linalg.norm(result.tip - rod.tip) <= DEFAULT_TOLERANCE, result.model_choice
+
+
+@pytest.mark.parametrize('prestrain, pressure, force, width', other_scenes())
+def test_default_model_meets_its_tolerance_off_the_ladder(designs, prestrain, pressure,
+                                                          force, width):
+    design = designs(prestrain, width)
+    result = finger_model(design, ModelSettings()).solve(pressure, force)
+    rod = RodSolver(design).solve(pressure, force)
+    assert result.success and rod.success, (result.message, rod.message)
+    assert np.linalg.norm(result.tip - rod.tip) <= DEFAULT_TOLERANCE, result.model_choice
