@@ -34,7 +34,7 @@ from scipy.optimize import minimize  # noqa: E402
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from fpc_gripper.model import ActuatorDesign, CCMSolver, RodSolver  # noqa: E402
+from fpc_gripper.model import ActuatorDesign, CCMSolver, engine, RodSolver  # noqa: E402
 from fpc_gripper.model.kinematics import node_positions  # noqa: E402
 from fpc_gripper.model.solver import SolverStatus  # noqa: E402
 
@@ -106,9 +106,9 @@ def plain_newton(solver, pressure, loads):
 
 
 def damped_newton(solver, pressure, loads):
-    """Run the solver's damped Newton from the flat state, without continuation."""
-    q, status, its, *_ = solver._newton(np.zeros((solver.n_segments, 4)), pressure, loads)
-    return q, status in (SolverStatus.SUCCESS, SolverStatus.UNSTABLE), its
+    """Run the engine's damped Newton from the flat state, without continuation."""
+    out = engine.newton(solver, solver.flat(), pressure, loads, solver._options)
+    return out.x, out.status in (SolverStatus.SUCCESS, SolverStatus.UNSTABLE), out.iterations
 
 
 def continuation(solver, pressure, force):

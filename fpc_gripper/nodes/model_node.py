@@ -213,13 +213,13 @@ class ModelNode(Node):
             clock=self._steady)
         self.add_on_set_parameters_callback(self._validate_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
-        with self._lock:
-            self._run(range(len(names)))
         self.get_logger().info(
             f'ready: {len(names)} fingers ({", ".join(names)}), tolerance '
             f'{param("tolerance").value} m, n_segments {param("n_segments").value}, '
             f'{param("pressure_model").value} pressure model, '
             f'input {self._pressure_topic}, max_rate_hz {param("max_rate_hz").value:g}')
+        with self._lock:
+            self._run(range(len(names)))
 
     # -- public helpers ---------------------------------------------------------------------
 

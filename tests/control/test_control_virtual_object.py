@@ -52,9 +52,9 @@ def test_table_follows_the_exact_force(cylinder):
     pressures = np.linspace(0.0, cylinder.touch_pressure, 17)[1:-1] + 1234.5
     table = [cylinder.force(p) for p in pressures]
     exact = [cylinder.exact_force(p) for p in pressures]
-    # 2e-4 N: next to the touch pressure the adaptive model switches from the unloaded
+    # 5e-4 N: next to the touch pressure the adaptive model switches from the unloaded
     # scene's discretisation (where the table ends at 0 N) to a loaded one.
-    np.testing.assert_allclose(table, exact, atol=2e-4)
+    np.testing.assert_allclose(table, exact, atol=5e-4)
     assert np.all(np.diff(table) < 0.0)       # less pressure, a harder push on the object
 
 

@@ -251,7 +251,8 @@ def _state(result):
     state = result.state
     if isinstance(state, tuple):                       # rod: theta [rad], (eps, c1) [-]
         return np.concatenate([np.ravel(part) for part in state])
-    return np.asarray(state) * result.solver._scale    # arc: (eps, kappa L, c1)
+    # arc and PCC: their engine unknowns, dimensionless
+    return np.asarray(result.solver._pack(state)).ravel()
 
 
 def _describe(result):

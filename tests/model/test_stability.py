@@ -170,8 +170,8 @@ def test_refinement_doubles_n_until_valid():
 # -- model selection ------------------------------------------------------------------
 def test_choose_model_prefers_cheap_models_for_easy_scenes():
     model = load_error_model()
-    easy = choose_model(Scene(ActuatorDesign.paper(0.15), 200e3), 2e-3)
-    hard = choose_model(Scene(ActuatorDesign.paper(0.40), 0.0, (0.0, -1.0)), 2e-3)
+    easy = choose_model(Scene(ActuatorDesign.paper(0.15), 200e3), 2e-5)
+    hard = choose_model(Scene(ActuatorDesign.paper(0.40), 0.0, (0.0, -1.0)), 2e-5)
     rank = {m['rung'] + str(m['n_segments']): m['cost'] for m in model['models']}
     assert easy.cost < hard.cost, (easy, hard)
     assert rank[easy.rung + str(easy.n_segments)] == easy.cost   # the JSON value, passed on

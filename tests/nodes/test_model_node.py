@@ -29,6 +29,7 @@ from fpc_gripper.io.messages import serialized_shape
 from fpc_gripper.io.messages import shape_message
 from fpc_gripper.io.messages import time_to_ns
 from fpc_gripper.model import AdaptiveSolver, CCMSolver, choose_model, Scene
+from fpc_gripper.model.pipeline import DEFAULT_TOLERANCE
 from fpc_gripper.nodes.model_node import ModelNode
 
 ATM = 101325.0
@@ -248,20 +249,23 @@ def adaptive(ros):
 @pytest.mark.ros
 def test_default_tolerance_uses_the_model_the_scene_needs(adaptive):
     node, probe = adaptive
-    assert node.get_parameter('tolerance').value == 0.5e-3     # the default, verbatim
-    reference = AdaptiveSolver(DESIGN, tolerance=0.5e-3)
+    assert node.get_parameter('tolerance').value == DEFAULT_TOLERANCE   # verbatim
+    reference = AdaptiveSolver(DESIGN, tolerance=DEFAULT_TOLERANCE)
     stamp = probe.send_pressure('finger_0', ATM + 150e3)
     expected = reference.solve(150e3)
     assert_shape_is(probe.shape_stamped('finger_0', stamp), expected, 'finger_0')
     # The choice is an independent decision of choose_model for this scene.
-    choice = choose_model(Scene(DESIGN, 150e3), 0.5e-3)
+    choice = choose_model(Scene(DESIGN, 150e3), DEFAULT_TOLERANCE)
     assert (expected.model_choice.rung, expected.model_choice.n_segments) == (
         choice.rung, choice.n_segments)
-    # A tip load needs a finer model than the unloaded scene.
+    # Loaded, the node still makes choose_model's choice for the loaded scene.
     stamp = probe.send_force('finger_0', 0.0, 0.5)
     loaded = reference.solve(150e3, (0.0, 0.5))
     assert_shape_is(probe.shape_stamped('finger_0', stamp), loaded, 'finger_0')
-    assert loaded.model_choice.n_segments > expected.model_choice.n_segments
+    choice = choose_model(Scene(DESIGN, 150e3, (0.0, 0.5)), DEFAULT_TOLERANCE)
+    assert (loaded.model_choice.rung, loaded.model_choice.n_segments) == (
+        choice.rung, choice.n_segments)
+    assert loaded.model_choice.predicted_error > expected.model_choice.predicted_error
 
 
 @pytest.mark.ros
