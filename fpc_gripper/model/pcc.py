@@ -1,10 +1,9 @@
 """Piecewise-constant-strain rod (PCC): the finger as N exact arcs, solved with a banded Newton."""
 
-import math
-
 import numpy as np
 from scipy.linalg import cho_solve_banded, cholesky_banded, eig_banded, LinAlgError, solve_banded
 
+from . import pcc_kernels as kernels
 from .engine import NewtonOptions
 from .ladder import _check_common, _LadderSolver, LadderResult
 from .section import share_segments
@@ -13,20 +12,16 @@ from .solver import PRESSURE_MODELS
 
 __all__ = ['PCCSolver', 'PCCResult', 'pcc_edges', 'half_angle_sinc']
 
-#: Taylor coefficients (-1)^k / (2k + 1)! of sin(h)/h in h^2, k = 0..9: for |h| < 1 the
-#: first omitted terms (of S and its derivatives) are below 1e-17 of S, S' / h and S''.
-_SINC = np.array([(-1.0) ** k / math.factorial(2 * k + 1) for k in range(10)])
-_K = np.arange(10)
-#: The same series differentiated once (divided by h) and twice in h.
-_SINC_D1 = (2 * _K * _SINC)[1:]
-_SINC_D2 = (2 * _K * (2 * _K - 1) * _SINC)[1:]
-#: |h| below which the series replaces the closed forms (which cancel as h -> 0).
-_SERIES_BELOW = 1.0
-#: Lower band of an element's 4 x 4 Hessian in the local unknowns (theta_prev, eps, c1,
-#: theta): (row p, column q) with p >= q, i.e. band row d = p - q.
-_BAND_PAIRS = tuple((q + d, q) for q in range(4) for d in range(4 - q))
 #: Step caps: 0.1 on (eps, c1) as the rod, 0.5 rad on the angles.
 _CAP = np.array([0.1, 0.1, 0.5])
+#: Columns of a state (theta, eps, c1) in the engine's order (eps, c1, theta), and back.
+_PACK = np.array([1, 2, 0])
+_UNPACK = np.array([2, 0, 1])
+#: No loads, as the kernels take them.
+_NO_NODES = np.zeros(0, dtype=np.int64)
+_NO_FORCES = np.zeros((0, 2))
+#: `_Banded.factor` of a Hessian that is not positive definite.
+_INDEFINITE = False
 
 
 def half_angle_sinc(delta, order=2):
@@ -50,29 +45,9 @@ def half_angle_sinc(delta, order=2):
         h = delta/2 for |h| < 1, the closed forms elsewhere.
 
     """
-    h = 0.5 * np.asarray(delta, dtype=float)
-    h2 = h * h
-    small = np.abs(h) < _SERIES_BELOW
-    hs = np.where(small, 1.0, h)                     # closed forms only where |h| >= 1
-    sn, cs = np.sin(hs), np.cos(hs)
-    out = [np.where(small, _horner(h2, _SINC), sn / hs)]
-    if order >= 1:
-        d1 = np.where(small, h * _horner(h2, _SINC_D1), (hs * cs - sn) / hs ** 2)
-        out.append(0.5 * d1)
-    if order >= 2:
-        d2 = np.where(small, _horner(h2, _SINC_D2),
-                      -sn / hs - 2.0 * cs / hs ** 2 + 2.0 * sn / hs ** 3)
-        out.append(0.25 * d2)
-    return tuple(out)
-
-
-def _horner(x, coefficients):
-    """Return sum_k coefficients[k] x^k by Horner's rule (x an ndarray)."""
-    out = np.full_like(x, coefficients[-1])
-    for c in coefficients[-2::-1]:
-        out *= x
-        out += c
-    return out
+    delta = np.asarray(delta, dtype=float)
+    rows = kernels.half_angle_sinc_kernel(delta.ravel(), int(order))
+    return tuple(row.reshape(delta.shape) for row in rows)
 
 
 def pcc_edges(design, n_segments):
@@ -121,12 +96,28 @@ class PCCResult(LadderResult):
 
 
 class _Banded:
-    """Symmetric banded Hessian: lower form ab[d, k] = H[k + d, k], d = 0..3 [J]."""
+    """
+    Symmetric banded Hessian: lower form ab[d, k] = H[k + d, k], d = 0..3 [J].
 
-    __slots__ = ('lower',)
+    `lower` is read only. `factor` is its banded Cholesky factor (`_INDEFINITE` where H
+    is not positive definite, None until needed); `derivatives` also keeps the Newton
+    step of its own gradient, which the first `step` with that gradient hands out.
+    """
 
-    def __init__(self, lower):
+    __slots__ = ('lower', 'factor', '_gradient', '_step')
+
+    def __init__(self, lower, factor=None, gradient=None, step=None):
         self.lower = lower
+        self.factor = factor
+        self._gradient = gradient
+        self._step = step
+
+    def cholesky(self):
+        """Return the banded Cholesky factor (computed once), or `_INDEFINITE`."""
+        if self.factor is None:
+            factor, definite = kernels.banded_cholesky(self.lower)
+            self.factor = factor if definite else _INDEFINITE
+        return self.factor
 
     def full_band(self):
         """Return the (7, n) general band form of `solve_banded` with (l, u) = (3, 3)."""
@@ -189,12 +180,15 @@ class PCCSolver(_LadderSolver):
 
     Notes
     -----
-    Newton steps solve the banded system by Cholesky (`scipy.linalg.cholesky_banded`).
-    Where the Hessian H is not positive definite the step solves (H + tau D) dx = -g
-    with D = |diag H| and tau = 2 |lambda_min| of the Jacobi-scaled Hessian
-    D^(-1/2) H D^(-1/2) (a banded eigenvalue solve), which is positive definite (its
-    smallest eigenvalue is |lambda_min|), so the step descends; that lambda_min < 0 is
-    reported for the stability verdict. The engine then backtracks as for every rung.
+    The energy, gradient, banded Hessian, chords, node Jacobian and outputs are
+    compiled kernels (`pcc_kernels`); Python only passes them the solver's arrays.
+    Newton steps solve the banded system by Cholesky (compiled, LAPACK's dpbtf2
+    algorithm). Where the Hessian H is not positive definite the step solves
+    (H + tau D) dx = -g with D = |diag H| and tau = 2 |lambda_min| of the Jacobi-scaled
+    Hessian D^(-1/2) H D^(-1/2) (a banded eigenvalue solve, `scipy.linalg.eig_banded`),
+    which is positive definite (its smallest eigenvalue is |lambda_min|), so the step
+    descends; that lambda_min < 0 is reported for the stability verdict. The engine
+    then backtracks as for every rung.
 
     References
     ----------
@@ -221,18 +215,15 @@ class PCCSolver(_LadderSolver):
         self.lengths = np.diff(self.edges)
         self.n_segments = self.lengths.size
         n = self.n_segments
-        self._stiffness = self.law.stiffness[self.segment_types]
-        self._gas = self.law.gas[self.segment_types]
-        # Band assembly: element i's local unknowns (theta_{i-1}, eps_i, c1_i, theta_i) are
-        # the engine unknowns 3i - 1 .. 3i + 2; theta_0 (index -1) is clamped.
-        first = 3 * np.arange(n) - 1
-        index, take = [], []
-        for p, q in _BAND_PAIRS:
-            keep = np.arange(n) if q > 0 else np.arange(1, n)
-            index.append((p - q) * 3 * n + first[keep] + q)
-            take.append(keep * 16 + 4 * p + q)
-        self._band_index = np.concatenate(index)
-        self._band_take = np.concatenate(take)
+        # The section law of every segment as kernel arrays, once: no per-call gathering.
+        self._stiffness, self._gas, self._pemc = kernels.section_arrays(self.law,
+                                                                        self.segment_types)
+        # Samples at evenly spaced reference arc length: their segment and the arc length
+        # into it depend on the edges alone.
+        s = np.linspace(0.0, self.length, self.samples)
+        seg = np.clip(np.searchsorted(self.edges, s, side='right') - 1, 0, n - 1)
+        self._sample_segment = seg.astype(np.int64)
+        self._sample_offset = s - self.edges[seg]
         # Scale of the angle gradients and Hessian: EI of the stiffest section over L [J].
         self.gradient_scale = float(self.law.stiffness[:, 1, 1].max()) / self.length
         self._options = NewtonOptions(max_iterations=self.max_iterations, xtol=self.tol,
@@ -247,103 +238,32 @@ class PCCSolver(_LadderSolver):
 
     # -- the discretisation's side of the engine: per segment (eps_i, c1_i, theta_i) --
     def _pack(self, state):
-        return np.asarray(state, dtype=float)[:, [1, 2, 0]].ravel()
+        return np.asarray(state, dtype=float)[:, _PACK].ravel()
 
     def _unpack(self, x):
-        return np.asarray(x, dtype=float).reshape(-1, 3)[:, [2, 0, 1]]
+        return np.asarray(x, dtype=float).reshape(-1, 3)[:, _UNPACK]
 
-    def _fields(self, x):
-        v = x.reshape(-1, 3)
-        eps, c1, theta = v[:, 0], v[:, 1], v[:, 2]
-        prev = np.concatenate([[0.0], theta[:-1]])
-        return eps, c1, theta, prev
-
-    def _segment_loads(self, loads):
-        """
-        Load carried by every segment, G_i = sum of the node forces at n >= i [N], (N, 2).
-
-        Node n is the end of segment n (node 0 the clamp, node N the tip).
-        """
+    def _load_arrays(self, loads):
+        """Return the loaded nodes (K,) in 0..N (N: the tip) and forces (K, 2) [N] for kernels."""
+        if not loads:
+            return _NO_NODES, _NO_FORCES
         n = self.n_segments
-        at = np.zeros((n + 1, 2))
-        for node, force in loads:
+        nodes = np.empty(len(loads), dtype=np.int64)
+        forces = np.empty((len(loads), 2))
+        for k, (node, force) in enumerate(loads):
             if isinstance(node, bool) or not isinstance(node, (int, np.integer)) \
                     or not 0 <= node <= n:
                 raise ValueError(f'load node must be an integer in [0, {n}], got {node!r}')
-            at[node] += np.asarray(force, dtype=float)
-        return np.cumsum(at[::-1], axis=0)[::-1][1:]
+            nodes[k] = node
+            forces[k] = force
+        return nodes, forces
 
     def energy(self, x, pressure, loads):
         """Total potential [J] at engine unknowns `x`."""
-        eps, c1, theta, prev = self._fields(x)
-        lengths = self.lengths
-        delta = theta - prev
-        y = np.stack([eps, delta / lengths, c1], axis=1)
-        total = float(lengths @ self.law.energy(y, self.pressure_coefficient * pressure,
-                                                self.segment_types))
-        carried = self._segment_loads(loads)
-        if carried.any():
-            mid = 0.5 * (theta + prev)
-            (sinc,) = half_angle_sinc(delta, order=0)
-            along = carried[:, 0] * np.cos(mid) + carried[:, 1] * np.sin(mid)
-            total -= float(((1.0 + eps) * lengths * sinc) @ along)
-        return total
-
-    def _element_derivatives(self, x, pressure, loads):
-        """Energy [J], element gradients (N, 4) and Hessians (N, 4, 4) in (a, eps, c1, b)."""
-        eps, c1, theta, prev = self._fields(x)
-        lengths = self.lengths
-        delta = theta - prev
-        y = np.stack([eps, delta / lengths, c1], axis=1)
-        w, g, h = self.law.derivatives(y, self.pressure_coefficient * pressure,
-                                       self.segment_types)
-        energy = float(lengths @ w)
-        ge = np.zeros((lengths.size, 4))
-        he = np.zeros((lengths.size, 4, 4))
-        # y = (eps, (b - a) / L, c1): gradient L T^T g and Hessian L T^T h T.
-        ge[:, 0] = -g[:, 1]
-        ge[:, 1] = lengths * g[:, 0]
-        ge[:, 2] = lengths * g[:, 2]
-        ge[:, 3] = g[:, 1]
-        bend = h[:, 1, 1] / lengths
-        he[:, 0, 0] = he[:, 3, 3] = bend
-        he[:, 0, 3] = he[:, 3, 0] = -bend
-        he[:, 1, 1] = lengths * h[:, 0, 0]
-        he[:, 2, 2] = lengths * h[:, 2, 2]
-        he[:, 1, 2] = he[:, 2, 1] = lengths * h[:, 0, 2]
-        for k, col in ((1, 0), (2, 2)):
-            he[:, k, 0] = he[:, 0, k] = -h[:, col, 1]
-            he[:, k, 3] = he[:, 3, k] = h[:, col, 1]
-        carried = self._segment_loads(loads)
-        if carried.any():
-            # -G . Delta r = -(1 + eps) L phi(a, b), phi = S(Delta) G . u(m), Delta = b - a,
-            # m = (a + b)/2, u = (cos, sin)(m), n = u' = (-sin, cos)(m).
-            mid = 0.5 * (theta + prev)
-            s0, s1, s2 = half_angle_sinc(delta)
-            cm, sm = np.cos(mid), np.sin(mid)
-            gu = carried[:, 0] * cm + carried[:, 1] * sm
-            gn = -carried[:, 0] * sm + carried[:, 1] * cm
-            phi = s0 * gu
-            p_d, p_m = s1 * gu, s0 * gn
-            p_dd, p_dm, p_mm = s2 * gu, s1 * gn, -s0 * gu
-            p_a, p_b = -p_d + 0.5 * p_m, p_d + 0.5 * p_m
-            p_aa = p_dd - p_dm + 0.25 * p_mm
-            p_bb = p_dd + p_dm + 0.25 * p_mm
-            p_ab = -p_dd + 0.25 * p_mm
-            stretch = (1.0 + eps) * lengths
-            energy -= float(stretch @ phi)
-            ge[:, 0] -= stretch * p_a
-            ge[:, 1] -= lengths * phi
-            ge[:, 3] -= stretch * p_b
-            he[:, 0, 0] -= stretch * p_aa
-            he[:, 3, 3] -= stretch * p_bb
-            he[:, 0, 3] -= stretch * p_ab
-            he[:, 3, 0] -= stretch * p_ab
-            he[:, 1, 0] -= lengths * p_a
-            he[:, 0, 1] -= lengths * p_a
-            he[:, 1, 3] -= lengths * p_b
-            he[:, 3, 1] -= lengths * p_b
-        return energy, ge, he
+        return kernels.energy_kernel(np.ascontiguousarray(x, dtype=float), self.lengths,
+                                     self._stiffness, self._gas, self._pemc,
+                                     self.pressure_coefficient * pressure,
+                                     *self._load_arrays(loads))
 
     def derivatives(self, x, pressure, loads):
         """
@@ -352,19 +272,19 @@ class PCCSolver(_LadderSolver):
         Returns
         -------
         energy : float
-            [J].
+            [J], equal to `energy`'s.
         gradient : ndarray, shape (3 N,)
             In (eps_i, c1_i, theta_i) per segment [J].
         hessian : _Banded
             Lower band (4, 3 N) of the exact Hessian [J].
 
         """
-        energy, ge, he = self._element_derivatives(x, pressure, loads)
-        grad = ge[:, 1:].copy()
-        grad[:-1, 2] += ge[1:, 0]
-        lower = np.bincount(self._band_index, he.ravel()[self._band_take],
-                            minlength=4 * x.size).reshape(4, x.size)
-        return energy, grad.ravel(), _Banded(lower)
+        energy, grad, lower, factor, step, definite = kernels.derivatives_kernel(
+            np.ascontiguousarray(x, dtype=float), self.lengths, self._stiffness, self._gas,
+            self._pemc, self.pressure_coefficient * pressure, *self._load_arrays(loads))
+        if definite:
+            return energy, grad, _Banded(lower, factor, grad, step)
+        return energy, grad, _Banded(lower, _INDEFINITE)
 
     def step(self, grad, hess):
         """
@@ -378,12 +298,19 @@ class PCCSolver(_LadderSolver):
             Jacobi-scaled Hessian (< 0).
 
         """
-        lower = hess.lower
-        try:
-            factor = cholesky_banded(lower, lower=True, check_finite=False)
-            return cho_solve_banded((factor, True), -grad, check_finite=False), 1.0
-        except LinAlgError:
-            pass
+        if grad is hess._gradient and hess._step is not None:
+            # The step `derivatives` computed with the factor; handed out once, as each
+            # call's answer is the caller's to keep.
+            step, hess._step = hess._step, None
+            return step, 1.0
+        factor = hess.cholesky()
+        if factor is not _INDEFINITE:
+            return kernels.cholesky_solve(factor, -np.ascontiguousarray(grad, dtype=float)), 1.0
+        # Indefinite: rare (buckling, far from equilibrium), left to scipy's banded solvers.
+        return self._shifted_step(np.asarray(grad, dtype=float), hess.lower)
+
+    def _shifted_step(self, grad, lower):
+        """Step (H + tau D) dx = -g of an indefinite H and the scaled lambda_min (< 0)."""
         diag = np.maximum(np.abs(lower[0]), 1e-300)
         root = np.sqrt(diag)
         n = diag.size
@@ -391,7 +318,7 @@ class PCCSolver(_LadderSolver):
         for d in range(4):
             scaled[d, :n - d] /= root[d:] * root[:n - d]
         if not np.all(np.isfinite(scaled)):
-            return np.full(n, math.nan), -1.0
+            return np.full(n, np.nan), -1.0
         min_eig = float(eig_banded(scaled, lower=True, eigvals_only=True, select='i',
                                    select_range=(0, 0), check_finite=False)[0])
         shift = 2.0 * abs(min_eig) + 1e-10
@@ -410,37 +337,19 @@ class PCCSolver(_LadderSolver):
 
     def solve_linear(self, hess, rhs):
         """Solve H x = rhs (banded Cholesky, else banded LU); LinAlgError if singular."""
-        try:
-            factor = cholesky_banded(hess.lower, lower=True, check_finite=False)
-            return cho_solve_banded((factor, True), rhs, check_finite=False)
-        except LinAlgError:
+        factor = hess.cholesky()
+        if factor is _INDEFINITE:
             return solve_banded((3, 3), hess.full_band(), rhs, check_finite=False)
-
-    def _chords(self, eps, theta, prev, order=0):
-        """Chords Delta r_i [m] (N, 2) and, with order 1, their derivatives in (a, eps, b)."""
-        lengths = self.lengths
-        delta = theta - prev
-        mid = 0.5 * (theta + prev)
-        sincs = half_angle_sinc(delta, order=order)
-        u = np.stack([np.cos(mid), np.sin(mid)], axis=1)
-        chord = ((1.0 + eps) * lengths * sincs[0])[:, None] * u
-        if order == 0:
-            return chord
-        normal = np.stack([-u[:, 1], u[:, 0]], axis=1)
-        stretch = ((1.0 + eps) * lengths)[:, None]
-        d_delta = sincs[1][:, None] * u
-        d_mid = sincs[0][:, None] * normal
-        d_a = stretch * (-d_delta + 0.5 * d_mid)
-        d_b = stretch * (d_delta + 0.5 * d_mid)
-        d_eps = (lengths * sincs[0])[:, None] * u
-        return chord, d_a, d_eps, d_b
+        rhs = np.asarray(rhs, dtype=float)
+        if rhs.ndim == 1:
+            return kernels.cholesky_solve(factor, np.ascontiguousarray(rhs))
+        return np.stack([kernels.cholesky_solve(factor, np.ascontiguousarray(column))
+                         for column in rhs.reshape(rhs.shape[0], -1).T],
+                        axis=1).reshape(rhs.shape)
 
     def nodes(self, x):
         """Segment ends O_0 = 0 .. O_N = tip [m], (N + 1, 2), at engine unknowns `x`."""
-        eps, _, theta, prev = self._fields(x)
-        out = np.zeros((self.n_segments + 1, 2))
-        np.cumsum(self._chords(eps, theta, prev), axis=0, out=out[1:])
-        return out
+        return kernels.nodes_kernel(np.ascontiguousarray(x, dtype=float), self.lengths)
 
     def node_jacobian(self, x, node):
         """Position of node `node` [m] and its derivatives in the engine unknowns, (2, 3 N)."""
@@ -448,40 +357,17 @@ class PCCSolver(_LadderSolver):
         if isinstance(node, bool) or not isinstance(node, (int, np.integer)) \
                 or not 0 <= node <= n:
             raise ValueError(f'`node` must be an integer in [0, {n}], got {node!r}')
-        eps, _, theta, prev = self._fields(x)
-        chord, d_a, d_eps, d_b = self._chords(eps, theta, prev, order=1)
-        jac = np.zeros((2, n, 3))
-        jac[:, :node, 0] = d_eps[:node].T
-        jac[:, :node, 2] = d_b[:node].T
-        jac[:, :node - 1, 2] += d_a[1:node].T
-        return chord[:node].sum(axis=0), jac.reshape(2, 3 * n)
+        return kernels.node_jacobian_kernel(np.ascontiguousarray(x, dtype=float),
+                                            self.lengths, int(node))
 
     # -- outputs ------------------------------------------------------------
     def _outputs(self, state, pressure, force):
-        x = self._pack(state)
-        theta, eps, c1 = state[:, 0], state[:, 1], state[:, 2]
-        prev = np.concatenate([[0.0], theta[:-1]])
-        beta = theta - prev
-        kappa = beta / self.lengths
-        nodes = self.nodes(x)
-        tip = nodes[-1].copy()
-        # Samples on the exact arcs: at sigma into segment i the tangent has turned by
-        # kappa_i sigma, and the partial chord is (1 + eps_i) sigma S(kappa_i sigma) along
-        # the mean tangent.
-        s = np.linspace(0.0, self.length, self.samples)
-        seg = np.clip(np.searchsorted(self.edges, s, side='right') - 1, 0, self.n_segments - 1)
-        sigma = s - self.edges[seg]
-        turn = kappa[seg] * sigma
-        (sinc,) = half_angle_sinc(turn, order=0)
-        half = prev[seg] + 0.5 * turn
-        reach = (1.0 + eps[seg]) * sigma * sinc
-        points = nodes[seg] + reach[:, None] * np.stack([np.cos(half), np.sin(half)], axis=1)
-        points[-1] = tip
-        strains = np.stack([eps[seg], kappa[seg], c1[seg]], axis=1)
-        loads = [(self.tip_node, force)] if np.any(force) else []
+        nodes, points, tangent, strains, beta, coefficients, energy = kernels.outputs_kernel(
+            np.ascontiguousarray(state, dtype=float), self.lengths, self._stiffness,
+            self._gas, self._pemc, self.pressure_coefficient * pressure,
+            np.ascontiguousarray(force, dtype=float), self._sample_segment,
+            self._sample_offset)
         return {
-            'points': points, 'tangent': prev[seg] + turn, 'strains': strains, 'tip': tip,
-            'beta': beta,
-            'coefficients': np.stack([eps, -kappa ** 2 / 6.0, c1, 0.5 * kappa], axis=1),
-            'nodes': nodes, 'energy': self.energy(x, pressure, loads),
+            'points': points, 'tangent': tangent, 'strains': strains, 'tip': nodes[-1].copy(),
+            'beta': beta, 'coefficients': coefficients, 'nodes': nodes, 'energy': energy,
         }
