@@ -13,6 +13,7 @@ sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 from timing import machine  # noqa: E402
 
 from fpc_gripper.model import ActuatorDesign, AdaptiveSolver, RodSolver  # noqa: E402
+from fpc_gripper.model.pipeline import DEFAULT_TOLERANCE  # noqa: E402
 from fpc_gripper.model.selection import make_solver  # noqa: E402
 
 RESULTS = pathlib.Path(__file__).resolve().parent / 'results' / 'adaptive.json'
@@ -53,7 +54,7 @@ def run_session(solver, steps):
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument('--repeats', type=int, default=3)
-    parser.add_argument('--tolerance', type=float, default=0.5e-3)
+    parser.add_argument('--tolerance', type=float, default=DEFAULT_TOLERANCE)
     parser.add_argument('--output', type=pathlib.Path, default=RESULTS)
     args = parser.parse_args(argv)
     design = ActuatorDesign.paper(prestrain=0.25)
@@ -65,6 +66,7 @@ def main(argv=None):
         'fixed CCM16 (paper)': lambda: make_solver('ccm', 16, design),
         'fixed CCM8 (paper)': lambda: make_solver('ccm', 8, design),
         'fixed aligned consistent CCM44': lambda: make_solver('ccm_aligned', 44, design),
+        'fixed PCC32': lambda: make_solver('pcc', 32, design),
         'rod (reference)': lambda: RodSolver(design),
     }
     rows = []

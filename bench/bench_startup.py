@@ -1,0 +1,118 @@
+"""Benchmark of model_node's start-up: process start to the first shape answering a command."""
+
+# Run inside the private network namespace:
+#   scripts/isolated .venv/bin/python bench/bench_startup.py
+# Each run starts `python -m fpc_gripper.nodes.model_node` (default parameters), publishes a
+# stamped pressure command to finger_0 every 50 ms from the moment the process starts, and
+# times the first finger_0/shape whose stamp is one of those commands. --cold first removes
+# numba's on-disk cache of the package's kernels, so that run includes compiling them.
+
+import argparse
+import json
+import os
+import pathlib
+import signal
+import statistics
+import subprocess
+import sys
+import threading
+import time
+
+import rclpy
+from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
+from timing import machine  # noqa: E402
+
+from fpc_gripper.io.messages import ns_to_time, time_to_ns  # noqa: E402
+
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+RESULTS = ROOT / 'bench' / 'results' / 'startup.json'
+#: Target of the issue "One equilibrium engine": start-up to the first shape, warm cache [s].
+TARGET_S = 3.0
+ATM = 101325.0
+
+
+def clear_numba_cache():
+    """Remove numba's cache files (index .nbi, data .nbc) of the package's kernels."""
+    removed = 0
+    for path in (ROOT / 'fpc_gripper').rglob('__pycache__/*.nb[ic]'):
+        path.unlink()
+        removed += 1
+    return removed
+
+
+def one_start(namespace):
+    """Start the node, command it and return seconds from process start to the answer."""
+    from nav_msgs.msg import Path
+    from sensor_msgs.msg import FluidPressure
+    context = Context()
+    rclpy.init(context=context)
+    node = rclpy.create_node('startup_probe', namespace=namespace, context=context)
+    reliable = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+    sent, answered = set(), threading.Event()
+
+    def on_shape(msg):
+        if time_to_ns(msg.header.stamp) in sent:
+            answered.set()
+
+    node.create_subscription(Path, 'finger_0/shape', on_shape, reliable)
+    publisher = node.create_publisher(FluidPressure, 'finger_0/pressure_command', reliable)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    spinner = threading.Thread(target=executor.spin, daemon=True)
+    spinner.start()
+    start = time.monotonic()
+    process = subprocess.Popen(
+        [sys.executable, '-m', 'fpc_gripper.nodes.model_node', '--ros-args',
+         '-r', f'__ns:={namespace}'], cwd=ROOT, stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL)
+    try:
+        while not answered.is_set() and time.monotonic() - start < 120.0:
+            msg = FluidPressure()
+            stamp = time.time_ns()
+            msg.header.stamp = ns_to_time(stamp)
+            msg.fluid_pressure = ATM + 100e3
+            sent.add(stamp)
+            publisher.publish(msg)
+            answered.wait(0.05)
+        elapsed = time.monotonic() - start
+    finally:
+        process.send_signal(signal.SIGINT)
+        process.wait(timeout=30)
+        executor.shutdown(timeout_sec=5.0)
+        spinner.join(timeout=5.0)
+        node.destroy_node()
+        context.try_shutdown()
+    return elapsed if answered.is_set() else float('nan')
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument('--repeats', type=int, default=5)
+    parser.add_argument('--cold', action='store_true',
+                        help='clear the numba cache first (one run includes compiling)')
+    args = parser.parse_args(argv)
+    if os.environ.get('FPC_NETNS') != '1':
+        parser.error('run inside the private namespace: scripts/isolated .venv/bin/python '
+                     'bench/bench_startup.py')
+    out = {'machine': machine(), 'target_s': TARGET_S}
+    if args.cold:
+        out['cache_files_removed'] = clear_numba_cache()
+        out['first_ever_s'] = one_start('/startup_cold')
+        print(f'first start ever (kernels compiled): {out["first_ever_s"]:.2f} s')
+    warm = [one_start(f'/startup_{i}') for i in range(args.repeats)]
+    out['warm_s'] = warm
+    out['warm_median_s'] = statistics.median(warm)
+    out['meets'] = out['warm_median_s'] <= TARGET_S
+    print(f'warm cache: median {out["warm_median_s"]:.2f} s over {len(warm)} starts '
+          f'(target <= {TARGET_S:g} s)')
+    RESULTS.parent.mkdir(parents=True, exist_ok=True)
+    RESULTS.write_text(json.dumps(out, indent=2) + '\n')
+    print(f'wrote {RESULTS}')
+
+
+if __name__ == '__main__':
+    main()
