@@ -5,13 +5,11 @@ from importlib import metadata
 import json
 import pathlib
 import statistics
-import subprocess
 import sys
-import time
 import timeit
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
-from timing import machine  # noqa: E402
+from timing import machine, numba_cache_files, run_process  # noqa: E402
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / 'tests' / 'model'))
 import ccm_reference as reference  # noqa: E402, I100 (the numpy formulas the kernels replaced)
@@ -97,18 +95,7 @@ def call_times(repeats):
 
 
 def _cache_files():
-    """List the on-disk numba cache of kernels.py (index .nbi and data .nbc files)."""
-    # numba picks __pycache__ beside the source, or a user cache dir if that is read-only.
-    path = pathlib.Path(kernels.segment_energy_kernel._cache._cache_path)
-    return sorted(path.glob('kernels.*.nb[ic]'))
-
-
-def _process(code):
-    """Wall time of a fresh interpreter running code, and what it printed."""
-    t0 = time.perf_counter()
-    out = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
-                         check=True, timeout=600)
-    return time.perf_counter() - t0, [float(v) for v in out.stdout.split()]
+    return numba_cache_files(kernels.segment_energy_kernel, 'kernels')
 
 
 def compile_costs(warm_runs):
@@ -116,11 +103,11 @@ def compile_costs(warm_runs):
     removed = _cache_files()
     for path in removed:
         path.unlink()
-    cold_wall, (_, cold_import, cold_calls) = _process(FIRST_CALLS)
+    cold_wall, (_, cold_import, cold_calls) = run_process(FIRST_CALLS)
     written = len(_cache_files())
-    warm = [_process(FIRST_CALLS) for _ in range(warm_runs)]
+    warm = [run_process(FIRST_CALLS) for _ in range(warm_runs)]
     # The same process without kernels: interpreter, numpy, scipy and the model.
-    baseline = [_process('import fpc_gripper.model')[0] for _ in range(warm_runs)]
+    baseline = [run_process('import fpc_gripper.model')[0] for _ in range(warm_runs)]
     return {
         'cache_files_removed': len(removed),
         'cache_files_written': written,

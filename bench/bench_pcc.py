@@ -23,9 +23,7 @@ import json
 import os
 import pathlib
 import statistics
-import subprocess
 import sys
-import time
 
 # One BLAS thread (set before numpy loads), as the other benchmarks.
 for _var in ('OPENBLAS_NUM_THREADS', 'OMP_NUM_THREADS', 'MKL_NUM_THREADS'):
@@ -39,7 +37,7 @@ sys.path.insert(0, str(_HERE))
 sys.path.insert(0, str(_HERE.parent / 'tests' / 'model'))
 from bench_ladder import PRESTRAINS, scenes  # noqa: E402, I100
 from pcc_reference import ReferencePCCSolver  # noqa: E402
-from timing import machine, median_time  # noqa: E402
+from timing import machine, median_time, numba_cache_files, run_process  # noqa: E402
 
 from fpc_gripper.model import ActuatorDesign, pcc_kernels, RodSolver  # noqa: E402
 from fpc_gripper.model.pcc import PCCSolver  # noqa: E402
@@ -160,18 +158,7 @@ def rigidity_times(repeats):
 
 
 def _cache_files():
-    """List the on-disk numba cache of pcc_kernels.py (index .nbi and data .nbc files)."""
-    # numba picks __pycache__ beside the source, or a user cache dir if that is read-only.
-    path = pathlib.Path(pcc_kernels.energy_kernel._cache._cache_path)
-    return sorted(path.glob('pcc_kernels.*.nb[ic]'))
-
-
-def _process(code):
-    """Wall time of a fresh interpreter running code, and the numbers it printed."""
-    t0 = time.perf_counter()
-    out = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
-                         check=True, timeout=600)
-    return time.perf_counter() - t0, [float(v) for v in out.stdout.split()]
+    return numba_cache_files(pcc_kernels.energy_kernel, 'pcc_kernels')
 
 
 def compile_costs(warm_runs):
@@ -185,12 +172,12 @@ def compile_costs(warm_runs):
     removed = _cache_files()
     for path in removed:
         path.unlink()
-    cold_wall, cold = _process(FIRST_CALLS)
+    cold_wall, cold = run_process(FIRST_CALLS)
     written = len(_cache_files())
-    warm = [_process(FIRST_CALLS) for _ in range(warm_runs)]
+    warm = [run_process(FIRST_CALLS) for _ in range(warm_runs)]
     # The interpreter with numpy and scipy, without numba or the model.
-    baseline = [_process('import numpy, scipy.linalg')[0] for _ in range(warm_runs)]
-    numba_import = [_process('import numba')[0] for _ in range(warm_runs)]
+    baseline = [run_process('import numpy, scipy.linalg')[0] for _ in range(warm_runs)]
+    numba_import = [run_process('import numba')[0] for _ in range(warm_runs)]
 
     def median(k):
         return statistics.median(w[1][k] for w in warm)

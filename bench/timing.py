@@ -1,8 +1,11 @@
-"""Timing helpers shared by the benchmarks: medians over repeats and machine facts."""
+"""Timing helpers shared by the benchmarks: medians, fresh processes, numba caches, machine."""
 
 import os
+import pathlib
 import platform
 import statistics
+import subprocess
+import sys
 import time
 
 
@@ -45,3 +48,18 @@ def machine():
         'machine': platform.machine(),
         'openblas_coretype': os.environ.get('OPENBLAS_CORETYPE'),
     }
+
+
+def numba_cache_files(dispatcher, stem):
+    """List the on-disk numba cache (index .nbi, data .nbc) of module `stem` of a kernel."""
+    # numba picks __pycache__ beside the source, or a user cache dir if that is read-only.
+    path = pathlib.Path(dispatcher._cache._cache_path)
+    return sorted(path.glob(f'{stem}.*.nb[ic]'))
+
+
+def run_process(code):
+    """Wall time of a fresh interpreter running `code` [s], and the numbers it printed."""
+    t0 = time.perf_counter()
+    out = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
+                         check=True, timeout=600)
+    return time.perf_counter() - t0, [float(v) for v in out.stdout.split()]

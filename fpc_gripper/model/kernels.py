@@ -7,7 +7,7 @@ import numba
 import numpy as np
 
 __all__ = ['segment_energy', 'segment_derivatives', 'load_energy', 'load_derivatives',
-           'beta_derivatives', 'load_arrays', 'consistent_strain_map', 'node_positions',
+           'node_jacobian', 'load_arrays', 'consistent_strain_map', 'node_positions',
            'end_rotation',
            'newton_step', 'segment_energy_kernel', 'segment_derivatives_kernel',
            'load_energy_kernel', 'load_derivatives_kernel', 'consistent_strain_map_kernel',
@@ -35,27 +35,6 @@ def _law_matrix(emc):
                      [a3 / 3.0, a2, 4.0 * a1],
                      [a2 / 4.0, a1, 0.0],
                      [a1 / 5.0, 0.0, 0.0]])
-
-
-# beta = atan2(b, a) with a = 1 + q0 + 3 q1 and b = 2 q3: the constant da/dq, db/dq.
-_DA = np.array([1.0, 3.0, 0.0, 0.0])
-_DB = np.array([0.0, 0.0, 0.0, 2.0])
-_DADB = np.stack([_DA, _DB])
-# Second-derivative patterns: da da^T - db db^T and da db^T + db da^T.
-_OUTER_DIFF = np.outer(_DA, _DA) - np.outer(_DB, _DB)
-_OUTER_MIX = np.outer(_DA, _DB) + np.outer(_DB, _DA)
-
-
-def beta_derivatives(q):
-    """First and second derivatives of beta_i in q_i, shapes (N, 4) and (N, 4, 4)."""
-    a = 1.0 + q[:, 0] + 3.0 * q[:, 1]
-    b = 2.0 * q[:, 3]
-    r2 = a * a + b * b
-    grad = np.stack([-b / r2, a / r2], axis=1) @ _DADB
-    r4 = r2 * r2
-    hess = ((2.0 * a * b / r4)[:, None, None] * _OUTER_DIFF
-            + ((b * b - a * a) / r4)[:, None, None] * _OUTER_MIX)
-    return grad, hess
 
 
 # -- segments -----------------------------------------------------------------------------
@@ -421,6 +400,74 @@ def load_energy_kernel(q, lengths, nodes, forces):
 
 
 @_jit
+def _chain_terms(q, lengths):
+    """
+    Node positions, dbeta/dq, d2beta/dq2 and R(theta_j) dp_j/dq_j of every segment, compiled.
+
+    p_j = L_j (1 + q0 + q1, q3) is the chord of segment j in its own frame, linear in q_j.
+    """
+    n = q.shape[0]
+    positions, theta, _ = node_positions_kernel(q, lengths)
+    # beta = atan2(b, a), a = 1 + q0 + 3 q1, b = 2 q3: da/dq = (1, 3, 0, 0), db/dq = 2 e3.
+    dbeta = np.zeros((n, 4))
+    d2beta = np.zeros((n, 4, 4))
+    # R(theta_j) dp_j/dq_j: p_j depends on (q0, q1) along X_j and q3 along Z_j.
+    rp = np.zeros((n, 2, 4))
+    for j in range(n):
+        a = 1.0 + q[j, 0] + 3.0 * q[j, 1]
+        b = 2.0 * q[j, 3]
+        r2 = a * a + b * b
+        dbeta[j, 0] = -b / r2
+        dbeta[j, 1] = 3.0 * (-b / r2)
+        dbeta[j, 3] = 2.0 * (a / r2)
+        r4 = r2 * r2
+        # (2 a b / r^4)(da da^T - db db^T) + ((b^2 - a^2) / r^4)(da db^T + db da^T).
+        diff = 2.0 * a * b / r4
+        mix = (b * b - a * a) / r4
+        d2beta[j, 0, 0] = diff
+        d2beta[j, 0, 1] = d2beta[j, 1, 0] = 3.0 * diff
+        d2beta[j, 1, 1] = 9.0 * diff
+        d2beta[j, 3, 3] = -4.0 * diff
+        d2beta[j, 0, 3] = d2beta[j, 3, 0] = 2.0 * mix
+        d2beta[j, 1, 3] = d2beta[j, 3, 1] = 6.0 * mix
+        c, s = math.cos(theta[j]), math.sin(theta[j])
+        rp[j, 0, 0] = rp[j, 0, 1] = lengths[j] * c
+        rp[j, 1, 0] = rp[j, 1, 1] = lengths[j] * s
+        rp[j, 0, 3] = -lengths[j] * s
+        rp[j, 1, 3] = lengths[j] * c
+    return positions, dbeta, d2beta, rp
+
+
+@_jit
+def node_jacobian_kernel(q, lengths, node):
+    """
+    Position of a chain node and its derivatives in the scaled unknowns, compiled.
+
+    dO_n/dq_j = R(theta_j) dp_j/dq_j + S (O_n - O_{j+1}) dbeta_j/dq_j for j < n (S the
+    90-degree rotation), 0 for j >= n.
+
+    Returns
+    -------
+    position : ndarray, shape (2,)
+        (X, Z) [m].
+    jacobian : ndarray, shape (2, N, 4)
+        d(X, Z)/dq [m].
+
+    """
+    positions, dbeta, _, rp = _chain_terms(q, lengths)
+    jac = np.zeros((2, q.shape[0], 4))
+    tx, tz = positions[node, 0], positions[node, 1]
+    for j in range(node):
+        # S r_j with r_j = O_n - O_{j+1}.
+        ax = -(tz - positions[j + 1, 1])
+        az = tx - positions[j + 1, 0]
+        for a in range(4):
+            jac[0, j, a] = rp[j, 0, a] + ax * dbeta[j, a]
+            jac[1, j, a] = rp[j, 1, a] + az * dbeta[j, a]
+    return positions[node].copy(), jac
+
+
+@_jit
 def load_derivatives_kernel(q, lengths, nodes, forces):
     """
     Energy, gradient and dense Hessian of point loads acting on chain nodes, compiled.
@@ -457,34 +504,7 @@ def load_derivatives_kernel(q, lengths, nodes, forces):
     energy = 0.0
     if nodes.size == 0:
         return energy, grad, hess
-    positions, theta, _ = node_positions_kernel(q, lengths)
-    # beta = atan2(b, a), a = 1 + q0 + 3 q1, b = 2 q3: da/dq = (1, 3, 0, 0), db/dq = 2 e3.
-    dbeta = np.zeros((n, 4))
-    d2beta = np.zeros((n, 4, 4))
-    # R(theta_j) dp_j/dq_j: p_j depends on (q0, q1) along X_j and q3 along Z_j.
-    rp = np.zeros((n, 2, 4))
-    for j in range(n):
-        a = 1.0 + q[j, 0] + 3.0 * q[j, 1]
-        b = 2.0 * q[j, 3]
-        r2 = a * a + b * b
-        dbeta[j, 0] = -b / r2
-        dbeta[j, 1] = 3.0 * (-b / r2)
-        dbeta[j, 3] = 2.0 * (a / r2)
-        r4 = r2 * r2
-        # (2 a b / r^4)(da da^T - db db^T) + ((b^2 - a^2) / r^4)(da db^T + db da^T).
-        diff = 2.0 * a * b / r4
-        mix = (b * b - a * a) / r4
-        d2beta[j, 0, 0] = diff
-        d2beta[j, 0, 1] = d2beta[j, 1, 0] = 3.0 * diff
-        d2beta[j, 1, 1] = 9.0 * diff
-        d2beta[j, 3, 3] = -4.0 * diff
-        d2beta[j, 0, 3] = d2beta[j, 3, 0] = 2.0 * mix
-        d2beta[j, 1, 3] = d2beta[j, 3, 1] = 6.0 * mix
-        c, s = math.cos(theta[j]), math.sin(theta[j])
-        rp[j, 0, 0] = rp[j, 0, 1] = lengths[j] * c
-        rp[j, 1, 0] = rp[j, 1, 1] = lengths[j] * s
-        rp[j, 0, 3] = -lengths[j] * s
-        rp[j, 1, 3] = lengths[j] * c
+    positions, dbeta, d2beta, rp = _chain_terms(q, lengths)
     arm = np.empty((n, 4))
     for k in range(nodes.size):
         fx, fz = forces[k, 0], forces[k, 1]
@@ -517,6 +537,18 @@ def load_derivatives_kernel(q, lengths, nodes, forces):
                         hess[4 * j + a, 4 * la + b] += value
                         hess[4 * la + b, 4 * j + a] += value
     return energy, grad, hess
+
+
+def node_jacobian(q, lengths, node):
+    """
+    Position of a chain node [m] and its derivatives in the scaled unknowns, (2, N, 4).
+
+    References
+    ----------
+    Zhou, Headings, Dapino (2022), eqs. (15)-(16); docs/physics.md, section 7.
+
+    """
+    return node_jacobian_kernel(np.ascontiguousarray(q, dtype=float), lengths, int(node))
 
 
 def load_energy(q, lengths, loads):

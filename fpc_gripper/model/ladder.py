@@ -117,6 +117,18 @@ def _check_common(design, pressure_model, samples):
         raise ValueError(f'`samples` must be an integer >= 3, got {samples!r}')
 
 
+def _set_common(solver, design, pressure_model, tol, samples, max_iterations):
+    """Check and store the settings every non-CCM rung has."""
+    _check_common(design, pressure_model, samples)
+    solver.design = design
+    solver.pressure_model = pressure_model
+    solver.pressure_coefficient = PRESSURE_MODELS[pressure_model]
+    solver.tol = float(tol)
+    solver.samples = int(samples)
+    solver.max_iterations = int(max_iterations)
+    solver.length = design.free_length
+
+
 def _check_solve(pressure, tip_force):
     pressure = real_number('pressure', pressure, '[Pa]')
     if pressure < 0.0:
@@ -268,13 +280,7 @@ class ArcSolver(_LadderSolver):
 
     def __init__(self, design, pressure_model='adiabatic', tol=1e-12, samples=129,
                  max_iterations=60):
-        _check_common(design, pressure_model, samples)
-        self.design = design
-        self.pressure_model = pressure_model
-        self.pressure_coefficient = PRESSURE_MODELS[pressure_model]
-        self.tol = float(tol)
-        self.samples = int(samples)
-        self.max_iterations = int(max_iterations)
+        _set_common(self, design, pressure_model, tol, samples, max_iterations)
         self.n_segments = 1
         breaks, types, law = station_layout(design, ribs='average')
         self.law = law.mean(np.bincount(types, np.diff(breaks), minlength=law.n_types))
@@ -489,15 +495,9 @@ class RodSolver(_LadderSolver):
         max_element_length = real_number('max_element_length', max_element_length, '[m]')
         if max_element_length <= 0.0:
             raise ValueError(f'`max_element_length` must be > 0 [m], got {max_element_length}')
-        self.design = design
-        self.pressure_model = pressure_model
-        self.pressure_coefficient = PRESSURE_MODELS[pressure_model]
-        self.tol = float(tol)
+        _set_common(self, design, pressure_model, tol, samples, max_iterations)
         self.ribs = ribs
         self.degree = int(degree)
-        self.samples = int(samples)
-        self.max_iterations = int(max_iterations)
-        self.length = design.free_length
         breaks, types, self.law = station_layout(design, ribs=ribs)
         edges, etypes = [0.0], []
         for lo, hi, kind in zip(breaks, breaks[1:], types):

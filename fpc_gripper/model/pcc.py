@@ -5,10 +5,9 @@ from scipy.linalg import cho_solve_banded, cholesky_banded, eig_banded, LinAlgEr
 
 from . import pcc_kernels as kernels
 from .engine import NewtonOptions
-from .ladder import _check_common, _LadderSolver, LadderResult
+from .ladder import _check_common, _LadderSolver, _set_common, LadderResult
 from .section import share_segments
 from .section_law import station_layout
-from .solver import PRESSURE_MODELS
 
 __all__ = ['PCCSolver', 'PCCResult', 'pcc_edges', 'half_angle_sinc']
 
@@ -204,13 +203,7 @@ class PCCSolver(_LadderSolver):
         if isinstance(n_segments, bool) or not isinstance(n_segments, (int, np.integer)) \
                 or n_segments < 1:
             raise ValueError(f'`n_segments` must be an integer >= 1, got {n_segments!r}')
-        self.design = design
-        self.pressure_model = pressure_model
-        self.pressure_coefficient = PRESSURE_MODELS[pressure_model]
-        self.tol = float(tol)
-        self.samples = int(samples)
-        self.max_iterations = int(max_iterations)
-        self.length = design.free_length
+        _set_common(self, design, pressure_model, tol, samples, max_iterations)
         self.edges, self.segment_types, self.law = pcc_edges(design, n_segments)
         self.lengths = np.diff(self.edges)
         self.n_segments = self.lengths.size

@@ -257,3 +257,21 @@ def test_compiled_strain_map_derivatives_match_finite_differences(states):
             h_fd = approx_derivative(row_jac, q[i], method='3-point', abs_step=1e-7)
             np.testing.assert_allclose(jac[i], j_fd, rtol=1e-7, atol=1e-9)
             np.testing.assert_allclose(hess3[i], h_fd, rtol=1e-6, atol=1e-8)
+
+
+def test_node_jacobian_is_the_derivative_of_the_node_position(states):
+    """The compiled node Jacobian against central differences of the compiled node positions."""
+    for solver, q, _, _ in states[::3]:
+        lengths = solver.segments.lengths
+        for node in sorted({solver.n_segments, max(1, solver.n_segments // 2)}):
+            position, jac = kernels.node_jacobian(q, lengths, node)
+            np.testing.assert_allclose(position, kernels.node_positions(q, lengths)[0][node],
+                                       rtol=0, atol=1e-15)
+
+            def at(x, node=node):
+                return kernels.node_positions(x.reshape(q.shape), lengths)[0][node]
+            numeric = approx_derivative(at, q.ravel(), method='3-point')
+            scale = np.abs(jac).max()
+            assert np.abs(jac.reshape(2, -1) - numeric).max() <= 1e-7 * scale
+            # Segments at and beyond the node do not move it.
+            assert not jac[:, node:, :].any()
