@@ -200,3 +200,41 @@ def test_no_reading_at_all_is_lost_feedback(model):
     assert law.step(0.1, [FingerMeasurement()] * 3).mode is Mode.APERTURE
     out = law.step(0.3, [FingerMeasurement()] * 3)
     assert out.mode is Mode.SAFE and out.commands == (0.0, 0.0, 0.0)
+
+
+class FailingModel:
+    """A real InverseModel whose pressure_for_rho raises while `failing` is set."""
+
+    def __init__(self, model):
+        self.model = model
+        self.failing = False
+
+    def pressure_for_rho(self, *args, **kwargs):
+        if self.failing:
+            raise ValueError('f(a) and f(b) must have different signs')
+        return self.model.pressure_for_rho(*args, **kwargs)
+
+    def __getattr__(self, name):
+        return getattr(self.model, name)
+
+
+def test_an_exception_in_a_step_holds_the_last_commands(model):
+    """A model error becomes an ERROR output with the last good commands, and then recovers."""
+    failing = FailingModel(model)
+    law = make_law(failing)
+    law.set_aperture(0.080, 0.0)
+    good = None
+    for k in range(1, 6):
+        good = law.step(0.02 * k, measured(120.0e3, 0.02 * k))
+    assert good.commands is not None and good.level is Level.OK
+    state = [(f.command, f.integral, f.phase) for f in law._fingers]
+    failing.failing = True
+    out = law.step(0.12, measured(121.0e3, 0.12))
+    assert out.level is Level.ERROR and 'model error' in out.message
+    assert 'different signs' in out.message
+    assert out.commands == good.commands              # held exactly: the values are copied
+    assert [(f.command, f.integral, f.phase) for f in law._fingers] == state   # step undone
+    assert out.mode is Mode.APERTURE                  # the goal is kept
+    failing.failing = False
+    after = law.step(0.14, measured(121.0e3, 0.14))
+    assert after.level is Level.OK and after.commands is not None
