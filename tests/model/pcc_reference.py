@@ -3,7 +3,7 @@
 import math
 
 import numpy as np
-from scipy.linalg import cho_solve_banded, cholesky_banded, eig_banded, LinAlgError, solve_banded
+from scipy.linalg import cho_solve_banded, cholesky_banded, LinAlgError, solve_banded
 
 from fpc_gripper.model.pcc import PCCSolver
 
@@ -199,29 +199,8 @@ class ReferencePCCSolver(PCCSolver):
             return cho_solve_banded((factor, True), -grad, check_finite=False), 1.0
         except LinAlgError:
             pass
-        diag = np.maximum(np.abs(lower[0]), 1e-300)
-        root = np.sqrt(diag)
-        n = diag.size
-        scaled = lower.copy()
-        for d in range(4):
-            scaled[d, :n - d] /= root[d:] * root[:n - d]
-        if not np.all(np.isfinite(scaled)):
-            return np.full(n, math.nan), -1.0
-        min_eig = float(eig_banded(scaled, lower=True, eigvals_only=True, select='i',
-                                   select_range=(0, 0), check_finite=False)[0])
-        shift = 2.0 * abs(min_eig) + 1e-10
-        for _ in range(60):
-            try:
-                trial = scaled.copy()
-                trial[0] += shift
-                factor = cholesky_banded(trial, lower=True, check_finite=False)
-                break
-            except LinAlgError:
-                shift *= 2.0
-        else:
-            return -grad / self.gradient_scale, min(min_eig, -1e-300)
-        dx = cho_solve_banded((factor, True), -grad / root, check_finite=False) / root
-        return dx, min(min_eig, -1e-300)
+        # The indefinite step is not compiled: the package's own scipy path is the reference.
+        return self._shifted_step(np.asarray(grad, dtype=float), lower)
 
     def solve_linear(self, hess, rhs):
         try:
