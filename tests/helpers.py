@@ -1,9 +1,11 @@
-"""Helpers shared by the test directories: tolerant, field-by-field ActuatorDesign comparison."""
+"""Helpers shared by the test directories: design comparison, deviations, finite differences."""
 
 import dataclasses
 import enum
 import math
 import numbers
+
+import numpy as np
 
 #: Default relative tolerance of `assert_designs_close`. Design fields are inputs or
 #: shipped literals; the only field ever seen to differ between machines was a fitted
@@ -53,3 +55,30 @@ def _assert_close(actual, expected, rtol, atol, where):
                        f'(rtol {rtol:g}, atol {atol:g})')
     else:
         assert actual == expected, f'{where}: {actual!r} != {expected!r}'
+
+
+def deviation(actual, expected, scale=None):
+    """
+    Return max |actual - expected| / scale (default: max |expected|), shapes equal.
+
+    Structural zeros (a one-segment load Hessian) must come out exactly zero.
+    """
+    actual, expected = np.asarray(actual), np.asarray(expected)
+    assert actual.shape == expected.shape and actual.dtype == expected.dtype
+    if scale is None:
+        scale = np.abs(expected).max()
+    error = np.abs(actual - expected).max()
+    if scale == 0.0:
+        return 0.0 if error == 0.0 else np.inf
+    return float(error / scale)
+
+
+def fd_derivative(fun, x, h):
+    """Fourth-order central differences of fun at x, one column per component of x."""
+    cols = []
+    for k in range(x.size):
+        e = np.zeros_like(x)
+        e[k] = h
+        cols.append((-fun(x + 2 * e) + 8.0 * fun(x + e) - 8.0 * fun(x - e) + fun(x - 2 * e))
+                    / (12.0 * h))
+    return np.stack(cols, axis=-1)

@@ -5,7 +5,7 @@ import math
 import numpy as np
 from scipy.linalg import cho_solve_banded, cholesky_banded, LinAlgError, solve_banded
 
-from fpc_gripper.model.pcc import PCCSolver
+from fpc_gripper.model.pcc import _Banded, PCCSolver
 
 #: Taylor coefficients (-1)^k / (2k + 1)! of sin(h)/h in h^2, k = 0..9.
 _SINC = np.array([(-1.0) ** k / math.factorial(2 * k + 1) for k in range(10)])
@@ -41,34 +41,6 @@ def _horner(x, coefficients):
         out *= x
         out += c
     return out
-
-
-class ReferenceBanded:
-    """Symmetric banded Hessian: lower form ab[d, k] = H[k + d, k], d = 0..3 [J]."""
-
-    __slots__ = ('lower',)
-
-    def __init__(self, lower):
-        self.lower = lower
-
-    def full_band(self):
-        lower = self.lower
-        n = lower.shape[1]
-        band = np.zeros((7, n))
-        band[3:] = lower
-        for d in range(1, 4):
-            band[3 - d, d:] = lower[d, :n - d]
-        return band
-
-    def dense(self):
-        lower = self.lower
-        n = lower.shape[1]
-        out = np.zeros((n, n))
-        for d in range(4):
-            k = np.arange(n - d)
-            out[k + d, k] = lower[d, :n - d]
-            out[k, k + d] = lower[d, :n - d]
-        return out
 
 
 class ReferencePCCSolver(PCCSolver):
@@ -190,7 +162,7 @@ class ReferencePCCSolver(PCCSolver):
         grad[:-1, 2] += ge[1:, 0]
         lower = np.bincount(self._band_index, he.ravel()[self._band_take],
                             minlength=4 * x.size).reshape(4, x.size)
-        return energy, grad.ravel(), ReferenceBanded(lower)
+        return energy, grad.ravel(), _Banded(lower)
 
     def step(self, grad, hess):
         lower = hess.lower

@@ -1,6 +1,7 @@
 """The compiled CCM kernels equal the numpy reference formulas and differentiate their energy."""
 
 import ccm_reference as reference
+from helpers import deviation
 import numpy as np
 import pytest
 from scipy.optimize._numdiff import approx_derivative
@@ -58,22 +59,6 @@ def states(request):
     return out
 
 
-def _deviation(actual, expected, scale=None):
-    """
-    Return max |actual - expected| / scale (default: max |expected|), shapes equal.
-
-    Structural zeros (a one-segment load Hessian) must come out exactly zero.
-    """
-    actual, expected = np.asarray(actual), np.asarray(expected)
-    assert actual.shape == expected.shape and actual.dtype == expected.dtype
-    if scale is None:
-        scale = np.abs(expected).max()
-    error = np.abs(actual - expected).max()
-    if scale == 0.0:
-        return 0.0 if error == 0.0 else np.inf
-    return float(error / scale)
-
-
 def _params(solver, pressure):
     return solver.design.prestrain, solver.design.emc_coefficients, \
         solver.pressure_coefficient * pressure
@@ -97,13 +82,13 @@ def test_kernels_run_compiled():
 def test_segment_kernels_equal_numpy(states):
     for solver, q, pressure, _ in states:
         args = (q, solver.segments, *_params(solver, pressure))
-        assert _deviation(kernels.segment_energy(*args), reference.segment_energy(*args)) <= RTOL
+        assert deviation(kernels.segment_energy(*args), reference.segment_energy(*args)) <= RTOL
         compiled = kernels.segment_derivatives(*args)
         original = reference.segment_derivatives(*args)
-        assert _deviation(compiled[0], original[0]) <= RTOL
+        assert deviation(compiled[0], original[0]) <= RTOL
         # At an equilibrium the gradient is round-off: measure it on its terms' scale.
-        assert _deviation(compiled[1], original[1], solver.gradient_scale) <= RTOL
-        assert _deviation(compiled[2], original[2]) <= RTOL
+        assert deviation(compiled[1], original[1], solver.gradient_scale) <= RTOL
+        assert deviation(compiled[2], original[2]) <= RTOL
 
 
 def test_load_kernels_equal_numpy(states):
@@ -125,8 +110,8 @@ def test_load_kernels_equal_numpy(states):
         assert abs(compiled[0] - original[0]) <= RTOL * scale
         assert abs(kernels.load_energy(q, lengths, loads)
                    - reference.load_energy(q, lengths, loads)) <= RTOL * scale
-        assert _deviation(compiled[1], original[1]) <= RTOL
-        assert _deviation(compiled[2], original[2]) <= RTOL
+        assert deviation(compiled[1], original[1]) <= RTOL
+        assert deviation(compiled[2], original[2]) <= RTOL
 
 
 def test_kinematics_kernels_equal_numpy(states):
@@ -134,11 +119,11 @@ def test_kinematics_kernels_equal_numpy(states):
         lengths = solver.segments.lengths
         for got, want in zip(kernels.node_positions(q, lengths),
                              reference.node_positions(q, lengths)):
-            assert _deviation(got, want, max(np.abs(want).max(), 1e-3)) <= RTOL
-        assert _deviation(kernels.end_rotation(q), reference.end_rotation(q), 1.0) <= RTOL
+            assert deviation(got, want, max(np.abs(want).max(), 1e-3)) <= RTOL
+        assert deviation(kernels.end_rotation(q), reference.end_rotation(q), 1.0) <= RTOL
         for got, want in zip(kernels.consistent_strain_map(q),
                              reference.consistent_strain_map(q)):
-            assert _deviation(got, want) <= RTOL
+            assert deviation(got, want) <= RTOL
 
 
 def _mirrored(hess):
@@ -161,7 +146,7 @@ def _check_step(solver, grad, hess):
         assert min_eig == pytest.approx(want_eig, rel=0, abs=RTOL * np.abs(hess).max())
         assert min_eig == pytest.approx(lowest, rel=0, abs=RTOL * np.abs(hess).max())
     rtol = STEP_RTOL if want_eig == 1.0 else EIG_STEP_RTOL
-    assert _deviation(step, want) <= rtol * hess.shape[-1] * kappa
+    assert deviation(step, want) <= rtol * hess.shape[-1] * kappa
     flat = step[:, :, None] if hess.ndim == 3 else step.ravel()
     residual = np.matmul(matrix, flat).reshape(grad.shape) + grad
     assert np.abs(residual).max() <= RTOL * np.abs(hess).max() * np.abs(step).max()

@@ -2,6 +2,7 @@
 
 import math
 
+from helpers import fd_derivative
 import numpy as np
 import pytest
 
@@ -41,17 +42,6 @@ def rod_tips():
                 assert result.success, result.message
                 out[scene] = result.tip
     return out
-
-
-def fd_derivative(fun, x, h):
-    """Fourth-order central differences of fun at x, one column per component of x."""
-    cols = []
-    for k in range(x.size):
-        e = np.zeros_like(x)
-        e[k] = h
-        cols.append((-fun(x + 2 * e) + 8.0 * fun(x + e) - 8.0 * fun(x - e) + fun(x - 2 * e))
-                    / (12.0 * h))
-    return np.stack(cols, axis=-1)
 
 
 def random_state(solver, seed, turning=3.0):

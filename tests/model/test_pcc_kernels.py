@@ -1,5 +1,6 @@
 """The compiled PCC rod equals its numpy reference and differentiates its own energy."""
 
+from helpers import deviation, fd_derivative
 import numpy as np
 from pcc_reference import half_angle_sinc as reference_sinc, ReferencePCCSolver
 import pytest
@@ -63,18 +64,6 @@ def states():
     return out
 
 
-def _deviation(actual, expected, scale=None):
-    """Return max |actual - expected| / scale (default: max |expected|), shapes equal."""
-    actual, expected = np.asarray(actual), np.asarray(expected)
-    assert actual.shape == expected.shape and actual.dtype == expected.dtype
-    if scale is None:
-        scale = np.abs(expected).max()
-    error = np.abs(actual - expected).max()
-    if scale == 0.0:
-        return 0.0 if error == 0.0 else np.inf
-    return float(error / scale)
-
-
 def test_kernels_run_compiled():
     # Under NUMBA_DISABLE_JIT the kernels would be plain Python and prove nothing.
     solver = PCCSolver(ActuatorDesign.paper(0.25), 24)
@@ -102,7 +91,7 @@ def test_half_angle_sinc_equals_numpy():
         got, want = half_angle_sinc(delta, order), reference_sinc(delta, order)
         assert len(got) == len(want) == order + 1
         for g, w in zip(got, want):
-            assert _deviation(g, w, 1.0) <= RTOL
+            assert deviation(g, w, 1.0) <= RTOL
     # Shapes as numpy: a scalar stays 0-d, a matrix keeps its shape.
     assert half_angle_sinc(0.3)[0].shape == ()
     assert half_angle_sinc(np.ones((2, 3)))[2].shape == (2, 3)
@@ -123,8 +112,8 @@ def test_derivatives_equal_numpy(states):
         scale = np.abs(want_grad).max()
         if equilibrium:
             scale = max(scale, (np.abs(want_hess.dense()) @ np.abs(x)).max())
-        assert _deviation(grad, want_grad, scale) <= RTOL
-        assert _deviation(hess.lower, want_hess.lower) <= RTOL
+        assert deviation(grad, want_grad, scale) <= RTOL
+        assert deviation(hess.lower, want_hess.lower) <= RTOL
         # The band's unused corner (beyond the last unknown) is exactly zero.
         m = x.size
         for d in range(1, 4):
@@ -139,7 +128,7 @@ def _check_step(solver, reference, grad, hess, want_hess):
     if want_eig == 1.0:
         assert min_eig == 1.0
         kappa = np.linalg.cond(dense)
-        assert _deviation(step, want) <= STEP_RTOL * kappa
+        assert deviation(step, want) <= STEP_RTOL * kappa
         residual = dense @ step + grad
         assert np.abs(residual).max() <= RTOL * np.abs(dense).max() * np.abs(step).max()
         return True
@@ -148,7 +137,7 @@ def _check_step(solver, reference, grad, hess, want_hess):
     assert min_eig == pytest.approx(want_eig, rel=1e-10)
     d = np.sqrt(np.abs(dense.diagonal()))
     shifted = dense + 2.0 * abs(want_eig) * np.diag(d ** 2)
-    assert _deviation(step, want) <= STEP_RTOL * np.linalg.cond(shifted)
+    assert deviation(step, want) <= STEP_RTOL * np.linalg.cond(shifted)
     assert grad @ step < 0.0
     return False
 
@@ -186,7 +175,7 @@ def test_linear_solves_equal_numpy(states):
         for rhs in (rng.normal(size=x.size), rng.normal(size=(x.size, 2))):
             got = solver.solve_linear(hess, rhs)
             assert got.shape == rhs.shape
-            assert _deviation(got, reference.solve_linear(want_hess, rhs)) <= STEP_RTOL * kappa
+            assert deviation(got, reference.solve_linear(want_hess, rhs)) <= STEP_RTOL * kappa
     # Indefinite: the banded LU of scipy, as the reference.
     solver, reference = states[0][:2]
     load = [(solver.tip_node, np.array([-200.0, 0.0]))]
@@ -194,20 +183,20 @@ def test_linear_solves_equal_numpy(states):
     hess, want_hess = solver.derivatives(x, 0.0, load)[2], reference.derivatives(x, 0.0, load)[2]
     rhs = rng.normal(size=x.size)
     kappa = np.linalg.cond(want_hess.dense())
-    assert _deviation(solver.solve_linear(hess, rhs),
-                      reference.solve_linear(want_hess, rhs)) <= STEP_RTOL * kappa
+    assert deviation(solver.solve_linear(hess, rhs),
+                     reference.solve_linear(want_hess, rhs)) <= STEP_RTOL * kappa
 
 
 def test_kinematics_equal_numpy(states):
     for solver, reference, x, _, _, _ in states:
         n = solver.n_segments
         # Positions on the finger's scale, 0.1 m: the root nodes are near zero.
-        assert _deviation(solver.nodes(x), reference.nodes(x), 0.1) <= RTOL
+        assert deviation(solver.nodes(x), reference.nodes(x), 0.1) <= RTOL
         for node in {1, n // 3, n - 1, n} - {0}:
             position, jac = solver.node_jacobian(x, node)
             want_position, want_jac = reference.node_jacobian(x, node)
-            assert _deviation(position, want_position, 0.1) <= RTOL
-            assert _deviation(jac, want_jac) <= RTOL
+            assert deviation(position, want_position, 0.1) <= RTOL
+            assert deviation(jac, want_jac) <= RTOL
         position, jac = solver.node_jacobian(x, 0)
         assert not position.any() and not jac.any()
 
@@ -221,7 +210,7 @@ def test_outputs_equal_numpy(states):
         assert got.keys() == want.keys()
         for key in want:
             scale = abs(want[key]) if key == 'energy' else None
-            assert _deviation(got[key], want[key], scale) <= RTOL, key
+            assert deviation(got[key], want[key], scale) <= RTOL, key
 
 
 @pytest.mark.parametrize('prestrain, pressure, force, n', [
@@ -235,12 +224,12 @@ def test_solves_equal_numpy(prestrain, pressure, force, n):
     got, want = solver.solve(pressure, force), reference.solve(pressure, force)
     assert got.success and want.success, (got.message, want.message)
     assert got.iterations == want.iterations
-    assert _deviation(got.state, want.state) <= 1e-12
-    assert _deviation(got.tip, want.tip) <= 1e-12
+    assert deviation(got.state, want.state) <= 1e-12
+    assert deviation(got.tip, want.tip) <= 1e-12
     warm = solver.solve(pressure + 1e3, force, initial=got)
     want_warm = reference.solve(pressure + 1e3, force, initial=want)
     assert warm.iterations == want_warm.iterations
-    assert _deviation(warm.state, want_warm.state) <= 1e-12
+    assert deviation(warm.state, want_warm.state) <= 1e-12
 
 
 def test_rigidity_equals_numpy():
@@ -254,17 +243,6 @@ def test_rigidity_equals_numpy():
 
 
 # -- the compiled path differentiates itself ---------------------------------------------
-def fd_derivative(fun, x, h):
-    """Fourth-order central differences of fun at x, one column per component of x."""
-    cols = []
-    for k in range(x.size):
-        e = np.zeros_like(x)
-        e[k] = h
-        cols.append((-fun(x + 2 * e) + 8.0 * fun(x + e) - 8.0 * fun(x - e) + fun(x - 2 * e))
-                    / (12.0 * h))
-    return np.stack(cols, axis=-1)
-
-
 @pytest.mark.parametrize('design, n, turning, loads', [
     (ActuatorDesign.paper(0.25).replace(ribs=False, Cx=0.110), 1, 3.0, 'tip'),
     (ActuatorDesign.paper(0.40), 22, 60.0, 'inner'),
