@@ -66,7 +66,7 @@ def call_times(repeats):
         result = solver.solve(PRESSURE, tip)
         assert result.success, result.message
         q, loads = result.q, list(result.point_loads)
-        _, grad, hess = solver._derivatives(q, PRESSURE, loads)
+        _, grad, hess = solver.derivatives(q, PRESSURE, loads)
         pairs = {
             'segment_energy': (lambda: reference.segment_energy(q, seg, *params),
                                lambda: kernels.segment_energy(q, seg, *params)),

@@ -64,7 +64,7 @@ def load_cases():
 
 def _classify(solver, q, converged, pressure, loads):
     """Return (status, valid, relative gradient) of a final state."""
-    _, grad, hess = solver._derivatives(q, pressure, loads)
+    _, grad, hess = solver.derivatives(q, pressure, loads)
     rel = float(np.abs(grad).max()) / solver.gradient_scale
     valid = bool(np.all(np.abs(2.0 * q[:, 3]) < 1.0))
     if not converged or not np.isfinite(rel):
@@ -86,7 +86,7 @@ def plain_newton(solver, pressure, loads):
     """Full Newton steps from the flat state, no damping and no step cap."""
     q = np.zeros((solver.n_segments, 4))
     for it in range(1, solver.max_iterations + 1):
-        _, grad, hess = solver._derivatives(q, pressure, loads)
+        _, grad, hess = solver.derivatives(q, pressure, loads)
         rel = float(np.abs(grad).max()) / solver.gradient_scale
         if not np.isfinite(rel):
             return q, False, it
@@ -124,14 +124,14 @@ def scipy_bfgs(solver, pressure, loads):
     scale = solver.gradient_scale
 
     def fun(x):
-        energy, grad, _ = solver._derivatives(x.reshape(n, 4), pressure, loads)
+        energy, grad, _ = solver.derivatives(x.reshape(n, 4), pressure, loads)
         return energy / scale, grad.ravel() / scale
 
     with np.errstate(all='ignore'):
         res = minimize(fun, np.zeros(4 * n), jac=True, method='BFGS',
                        options={'gtol': BFGS_RELATIVE_GTOL, 'maxiter': 5000})
     q = res.x.reshape(n, 4)
-    _, grad, _ = solver._derivatives(q, pressure, loads)
+    _, grad, _ = solver.derivatives(q, pressure, loads)
     rel = float(np.abs(grad).max()) / scale
     return q, bool(np.isfinite(rel) and rel <= BFGS_RELATIVE_GTOL), int(res.nit)
 

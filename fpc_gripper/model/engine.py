@@ -3,13 +3,18 @@
 from dataclasses import dataclass
 import enum
 import math
+import pathlib
 
+import numba
+from numba import types
+from numba.extending import overload, register_jitable
 import numpy as np
 
 from . import kernels
 
 __all__ = ['SolverStatus', 'NewtonOptions', 'NewtonOutcome', 'newton', 'solve', 'rigidity',
-           'linear_step', 'linear_solve', 'BorderedOutcome']
+           'linear_step', 'linear_solve', 'BorderedOutcome', 'solve_batch', 'rigidity_batch',
+           'BatchOutcome']
 
 
 class SolverStatus(enum.IntEnum):
@@ -21,6 +26,15 @@ class SolverStatus(enum.IntEnum):
     NOT_FINITE = 3
     UNSTABLE = 4
     CONTINUATION_FAILED = 5
+
+
+# The loops below compare plain ints: numba compiles them as constants.
+_SUCCESS = int(SolverStatus.SUCCESS)
+_MAX_ITERATIONS = int(SolverStatus.MAX_ITERATIONS)
+_LINE_SEARCH_FAILED = int(SolverStatus.LINE_SEARCH_FAILED)
+_NOT_FINITE = int(SolverStatus.NOT_FINITE)
+_UNSTABLE = int(SolverStatus.UNSTABLE)
+_CONTINUATION_FAILED = int(SolverStatus.CONTINUATION_FAILED)
 
 
 @dataclass(frozen=True)
@@ -57,6 +71,14 @@ class NewtonOptions:
     energy_scale: float = 1.0
     armijo: float = 1e-4
 
+    def packed(self, gradient_scale, shape):
+        """Return the options as the loops take them: a tuple and the step cap of `shape`."""
+        cap = np.ascontiguousarray(np.broadcast_to(np.asarray(self.max_step, dtype=float),
+                                                   shape))
+        return (int(self.max_iterations), float(self.gtol), float(self.xtol),
+                float(self.flat_slope), float(self.energy_scale), float(self.armijo),
+                float(gradient_scale)), cap
+
 
 @dataclass(frozen=True)
 class NewtonOutcome:
@@ -71,7 +93,20 @@ class NewtonOutcome:
     fraction: float = 1.0
 
 
-def linear_step(grad, hess, floor=1e-8):
+@dataclass(frozen=True)
+class BorderedOutcome:
+    """Loaded state of a displacement-controlled solve (internal)."""
+
+    x: np.ndarray
+    force: float
+    success: bool
+    iterations: int
+    fraction: float
+    stable: bool
+    gradient: float
+
+
+def linear_step(grad, hess, floor=kernels.EIGEN_FLOOR):
     """
     Newton step -H^-1 g, and the smallest eigenvalue's sign (1.0 when positive definite).
 
@@ -90,9 +125,388 @@ def linear_solve(hess, rhs):
     return np.linalg.solve(hess, rhs.ravel()).reshape(rhs.shape)
 
 
+# -- the discretisation interface ----------------------------------------------------------
+# A discretisation is either a Python object with methods (the loops then run interpreted)
+# or a namedtuple of arrays whose class carries `_kernels`, a dict of compiled functions of
+# the same names taking the namedtuple first (the loops then run compiled, for that
+# namedtuple type). These five functions are that interface; the loops call nothing else.
+def _loads(nodes, forces):
+    return [(int(node), forces[k]) for k, node in enumerate(nodes)]
+
+
+def _derivatives(problem, x, pressure, nodes, forces):
+    """Energy [J], gradient (shape of x) and Hessian (opaque to the engine) at x."""
+    return problem.derivatives(x, pressure, _loads(nodes, forces))
+
+
+def _energy(problem, x, pressure, nodes, forces):
+    """Total potential [J] at x."""
+    return problem.energy(x, pressure, _loads(nodes, forces))
+
+
+def _step(problem, grad, hess):
+    """Newton step (shape of grad) and the smallest eigenvalue (1.0 when H is PD)."""
+    return problem.step(grad, hess)
+
+
+def _solve_linear(problem, hess, rhs):
+    """Solve H x = rhs: (x, True), or (anything, False) where H is singular."""
+    try:
+        return problem.solve_linear(hess, rhs), True
+    except np.linalg.LinAlgError:
+        return rhs, False
+
+
+def _node_jacobian(problem, x, node):
+    """Position (2,) of a node [m] and its derivatives, shape (2,) + x.shape."""
+    return problem.node_jacobian(x, node)
+
+
+def _kernel(problem, name):
+    """The compiled `name` of a namedtuple discretisation type, None for others."""
+    if isinstance(problem, types.BaseNamedTuple):
+        return getattr(problem.instance_class, '_kernels', {}).get(name)
+    return None
+
+
+@overload(_derivatives, jit_options={'nogil': True})
+def _derivatives_compiled(problem, x, pressure, nodes, forces):
+    kernel = _kernel(problem, 'derivatives')
+    if kernel is not None:
+        return lambda problem, x, pressure, nodes, forces: kernel(problem, x, pressure, nodes,
+                                                                  forces)
+    return None
+
+
+@overload(_energy, jit_options={'nogil': True})
+def _energy_compiled(problem, x, pressure, nodes, forces):
+    kernel = _kernel(problem, 'energy')
+    if kernel is not None:
+        return lambda problem, x, pressure, nodes, forces: kernel(problem, x, pressure, nodes,
+                                                                  forces)
+    return None
+
+
+@overload(_step, jit_options={'nogil': True})
+def _step_compiled(problem, grad, hess):
+    kernel = _kernel(problem, 'step')
+    if kernel is not None:
+        return lambda problem, grad, hess: kernel(problem, grad, hess)
+    return None
+
+
+@overload(_solve_linear, jit_options={'nogil': True})
+def _solve_linear_compiled(problem, hess, rhs):
+    kernel = _kernel(problem, 'solve_linear')
+    if kernel is not None:
+        return lambda problem, hess, rhs: kernel(problem, hess, rhs)
+    return None
+
+
+@overload(_node_jacobian, jit_options={'nogil': True})
+def _node_jacobian_compiled(problem, x, node):
+    kernel = _kernel(problem, 'node_jacobian')
+    if kernel is not None:
+        return lambda problem, x, node: kernel(problem, x, node)
+    return None
+
+
+# -- the loops: each written once, run compiled or interpreted -----------------------------
+@register_jitable
+def _newton(problem, x, pressure, nodes, forces, options, cap):
+    """Damped Newton: (x, status, iterations, gradient, step, min_eig); see `newton`."""
+    max_iterations, gtol, xtol, flat_slope, energy_scale, armijo, scale = options
+    step_norm = np.inf
+    grad_rel = np.inf
+    energy, grad, hess = _derivatives(problem, x, pressure, nodes, forces)
+    for iteration in range(1, max_iterations + 1):
+        grad_rel = np.abs(grad).max() / scale if grad.size else 0.0
+        if not (np.isfinite(energy) and np.isfinite(grad_rel)):
+            return x, _NOT_FINITE, iteration, grad_rel, step_norm, np.nan
+        step, min_eig = _step(problem, grad, hess)
+        step_norm = np.abs(step).max() if step.size else 0.0
+        if not np.isfinite(step_norm):
+            return x, _NOT_FINITE, iteration, grad_rel, step_norm, np.nan
+        if grad_rel <= gtol and step_norm <= xtol:
+            status = _SUCCESS if min_eig > 0.0 else _UNSTABLE
+            return x + step, status, iteration, grad_rel, step_norm, min_eig
+        ratio = (np.abs(step) / cap).max()
+        if ratio > 1.0:
+            step = step / ratio
+        slope = np.sum(grad * step)
+        if not slope < 0.0:
+            step = -grad / scale
+            slope = -np.sum(grad * grad) / scale
+        trial = x + step
+        e_trial, g_trial, h_trial = _derivatives(problem, trial, pressure, nodes, forces)
+        flat = -slope <= flat_slope * (abs(energy) + energy_scale)
+        if e_trial <= energy + armijo * slope or flat:
+            x, energy, grad, hess = trial, e_trial, g_trial, h_trial
+            step_norm = np.abs(step).max()
+            continue
+        alpha = 0.5
+        while True:
+            trial = x + alpha * step
+            if _energy(problem, trial, pressure, nodes, forces) <= energy + armijo * alpha * slope:
+                break
+            alpha *= 0.5
+            if alpha < 1e-10:
+                return x, _LINE_SEARCH_FAILED, iteration, grad_rel, step_norm, min_eig
+        x = trial
+        step_norm = alpha * np.abs(step).max()
+        energy, grad, hess = _derivatives(problem, x, pressure, nodes, forces)
+    return x, _MAX_ITERATIONS, max_iterations, grad_rel, step_norm, np.nan
+
+
+@register_jitable
+def _solve(problem, initial, warm, flat, pressure, nodes, forces, options, cap):
+    """Warm, cold, then continuation: `_newton`'s tuple and the fraction; see `solve`."""
+    spent = 0
+    if warm:
+        x, status, its, grad, step, eig = _newton(problem, initial, pressure, nodes, forces,
+                                                  options, cap)
+        if status == _SUCCESS:
+            return x, status, its, grad, step, eig, 1.0
+        spent = its
+    x, status, its, grad, step, eig = _newton(problem, flat, pressure, nodes, forces, options,
+                                              cap)
+    spent += its
+    if status == _SUCCESS or status == _UNSTABLE:
+        return x, status, spent, grad, step, eig, 1.0
+    x, status, its, grad, step, eig = _newton(problem, flat, 0.0, nodes[:0], forces[:0],
+                                              options, cap)
+    spent += its
+    if status != _SUCCESS:
+        return x, _CONTINUATION_FAILED, spent, np.inf, np.inf, np.nan, 0.0
+    lam = 0.0
+    dlam = 0.25
+    while True:
+        target = min(1.0, lam + dlam)
+        sub, status, its, grad, step, eig = _newton(problem, x, target * pressure, nodes,
+                                                    target * forces, options, cap)
+        spent += its
+        if status == _SUCCESS:
+            x, lam = sub, target
+            dlam = min(2.0 * dlam, 1.0)
+            if lam >= 1.0:
+                return x, status, spent, grad, step, eig, 1.0
+        else:
+            dlam *= 0.5
+            if dlam < 1.0 / 256:
+                return x, _CONTINUATION_FAILED, spent, grad, step, np.nan, lam
+
+
+@register_jitable
+def _bordered_newton(problem, x, force, pressure, node, direction, target, options, cap):
+    """Solve grad Pi(x; f e) = 0 and e . O_node(x) = target for (x, f): (x, f, ok, its)."""
+    max_iterations, gtol, xtol, _, _, _, scale = options
+    nodes = np.full(1, node)
+    for iteration in range(1, max_iterations + 1):
+        forces = (force * direction).reshape(1, 2)
+        _, residual, hess = _derivatives(problem, x, pressure, nodes, forces)
+        position, jacobian = _node_jacobian(problem, x, node)
+        # The potential of a unit load along e is -e . O: its gradient borders the system.
+        border = -(direction[0] * jacobian[0] + direction[1] * jacobian[1])
+        gap = direction[0] * position[0] + direction[1] * position[1] - target
+        a, ok_a = _solve_linear(problem, hess, -residual)
+        b, ok_b = _solve_linear(problem, hess, border)
+        if not (ok_a and ok_b):
+            return x, force, False, iteration
+        denominator = np.sum(border * b)
+        if not (np.isfinite(denominator) and denominator != 0.0):
+            return x, force, False, iteration
+        # H dx + border df = -r and border . dx = gap.
+        dforce = (np.sum(border * a) - gap) / denominator
+        dx = a - dforce * b
+        step = np.abs(dx).max() if dx.size else 0.0
+        if not (np.isfinite(step) and np.isfinite(dforce)):
+            return x, force, False, iteration
+        if (np.abs(dx) / cap).max() > 1.0:
+            return x, force, False, iteration
+        x = x + dx
+        force = force + dforce
+        balanced = not np.isfinite(gtol) or np.abs(residual).max() / scale <= gtol
+        if balanced and step <= xtol and abs(gap) <= 1e-12 * max(abs(target), 1e-3):
+            return x, force, True, iteration
+    return x, force, False, max_iterations
+
+
+@register_jitable
+def _rigidity(problem, x, pressure, node, direction, displacement, options, cap):
+    """Displacement control: (x, force, success, its, fraction, stable, gradient)."""
+    force = 0.0
+    position = _node_jacobian(problem, x, node)[0]
+    start = direction[0] * position[0] + direction[1] * position[1]
+    done = 0.0
+    iterations = 0
+    increment = 1.0
+    while done < 1.0:
+        goal = min(1.0, done + increment)
+        x_new, f_new, ok, its = _bordered_newton(problem, x, force, pressure, node, direction,
+                                                 start + goal * displacement, options, cap)
+        iterations += its
+        if ok:
+            x, force, done = x_new, f_new, goal
+            increment = min(1.0, 2.0 * increment)
+        else:
+            increment *= 0.5
+            if increment < 1.0 / 64:
+                return x, force, False, iterations, done, False, np.inf
+    nodes = np.full(1, node)
+    forces = (force * direction).reshape(1, 2)
+    _, grad, hess = _derivatives(problem, x, pressure, nodes, forces)
+    min_eig = _step(problem, grad, hess)[1]
+    return x, force, True, iterations, 1.0, min_eig > 0.0, np.abs(grad).max() / options[6]
+
+
+def _sources_stamp():
+    """(name, mtime, size) of every source of the model package."""
+    here = pathlib.Path(__file__).resolve().parent
+    return tuple((path.name, path.stat().st_mtime_ns, path.stat().st_size)
+                 for path in sorted(here.glob('*.py')))
+
+
+def _cached(dispatcher):
+    """
+    Make a compiled entry's disk cache stale when any model source changes, not its own only.
+
+    numba checks the stamp of the file that defines a cached function, but the entries
+    below compile in the kernels of other modules (the discretisations'): without this an
+    edited kernel would keep running its old compiled code. The stamp is numba's own
+    (`IndexDataCacheFile._source_stamp`, numba 0.68), extended with every model source's.
+    """
+    cache_file = getattr(getattr(dispatcher, '_cache', None), '_cache_file', None)
+    if cache_file is not None and hasattr(cache_file, '_source_stamp'):
+        cache_file._source_stamp = (cache_file._source_stamp, _sources_stamp())
+    return dispatcher
+
+
+# Compiled once per discretisation type and kept on disk; nogil lets callers thread them.
+def _jit(function):
+    return _cached(numba.njit(cache=True, nogil=True)(function))
+
+
+def _jit_parallel(function):
+    return _cached(numba.njit(cache=True, nogil=True, parallel=True)(function))
+
+
+@_jit
+def _newton_entry(problem, x, pressure, nodes, forces, options, cap):
+    return _newton(problem, x, pressure, nodes, forces, options, cap)
+
+
+@_jit
+def _solve_entry(problem, initial, warm, flat, pressure, nodes, forces, options, cap):
+    return _solve(problem, initial, warm, flat, pressure, nodes, forces, options, cap)
+
+
+@_jit
+def _rigidity_entry(problem, x, pressure, node, direction, displacement, options, cap):
+    return _rigidity(problem, x, pressure, node, direction, displacement, options, cap)
+
+
+@_jit_parallel
+def _solve_batch_entry(problems, design, pressures, nodes, forces, flat, options, cap):
+    count = pressures.size
+    states = np.empty((count,) + flat.shape)
+    status = np.empty(count, dtype=np.int64)
+    iterations = np.empty(count, dtype=np.int64)
+    figures = np.empty((count, 4))
+    for i in numba.prange(count):
+        x, code, its, grad, step, eig, fraction = _solve(
+            problems[design[i]], flat, False, flat, pressures[i], nodes, forces[i], options, cap)
+        states[i] = x
+        status[i] = code
+        iterations[i] = its
+        figures[i, 0] = grad
+        figures[i, 1] = step
+        figures[i, 2] = eig
+        figures[i, 3] = fraction
+    return states, status, iterations, figures
+
+
+@_jit_parallel
+def _rigidity_batch_entry(unloaded, loaded, design, pressures, node, direction, displacement,
+                          flat, options, cap):
+    count = pressures.size
+    free = np.empty((count,) + flat.shape)
+    states = np.empty((count,) + flat.shape)
+    status = np.empty(count, dtype=np.int64)
+    iterations = np.empty((count, 2), dtype=np.int64)
+    figures = np.empty((count, 7))
+    nodes = np.zeros(0, dtype=np.int64)
+    forces = np.zeros((0, 2))
+    for i in numba.prange(count):
+        d = design[i]
+        x, code, its, grad, step, eig, fraction = _solve(
+            unloaded[d], flat, False, flat, pressures[i], nodes, forces, options, cap)
+        free[i] = x
+        status[i] = code
+        iterations[i, 0] = its
+        figures[i, 0] = grad
+        figures[i, 1] = step
+        figures[i, 2] = eig
+        if code != _SUCCESS:
+            states[i] = x
+            iterations[i, 1] = 0
+            figures[i, 3:] = np.nan
+            continue
+        y, force, ok, its, done, stable, gradient = _rigidity(
+            loaded[d], x, pressures[i], node, direction, displacement, options, cap)
+        states[i] = y
+        iterations[i, 1] = its
+        figures[i, 3] = force if ok else np.nan
+        figures[i, 4] = done
+        figures[i, 5] = 1.0 if stable else 0.0
+        figures[i, 6] = gradient
+    return free, status, states, iterations, figures
+
+
+# -- the engine's Python entry points -------------------------------------------------------
+def _compiled(problem, loaded):
+    """The namedtuple a discretisation runs compiled as (see `kernel_data`), or None."""
+    make = getattr(problem, 'kernel_data', None)
+    return None if make is None else make(loaded)
+
+
+def _packed(problem, options, shape):
+    """The loops' options and step cap for unknowns of `shape` (once per solver and options)."""
+    key = (id(options), shape)
+    memo = problem.__dict__.setdefault('_engine_packed', {})
+    hit = memo.get(key)
+    if hit is None or hit[0] is not options:
+        hit = memo[key] = (options, *options.packed(problem.gradient_scale, shape))
+    return hit[1], hit[2]
+
+
+def _flat(problem):
+    """``problem.flat()``, once per solver: the loops never write to their start (`_own`)."""
+    flat = problem.__dict__.get('_engine_flat')
+    if flat is None:
+        flat = np.ascontiguousarray(problem.flat(), dtype=float)
+        problem.__dict__['_engine_flat'] = flat
+    return flat
+
+
+def _own(x, problem):
+    """`x`, copied if it is the solver's shared flat state (a failed first step returns it)."""
+    return x.copy() if x is problem.__dict__.get('_engine_flat') else x
+
+
+def _outcome(out, problem, fraction=1.0):
+    x, status, iterations, grad, step, eig = out[:6]
+    return NewtonOutcome(_own(x, problem), SolverStatus(int(status)), int(iterations),
+                         float(grad),
+                         float(step), float(eig), float(out[6]) if len(out) > 6 else fraction)
+
+
 def newton(problem, x, pressure, loads, options):
     """
     Damped Newton on the total potential of a discretisation.
+
+    The loop (`_newton`) is written once: compiled for a discretisation that has
+    ``kernel_data(loaded)`` (a namedtuple whose class carries its compiled kernels),
+    interpreted with the discretisation's methods otherwise.
 
     Parameters
     ----------
@@ -116,54 +530,18 @@ def newton(problem, x, pressure, loads, options):
         Hessian (the returned state includes that last step); UNSTABLE for a converged
         saddle; otherwise why it stopped.
 
+    References
+    ----------
+    docs/physics.md, section 8.
+
     """
-    scale = problem.gradient_scale
-    cap = options.max_step
-    step_norm = math.inf
-    grad_rel = math.inf
-    energy, grad, hess = problem.derivatives(x, pressure, loads)
-    for iteration in range(1, options.max_iterations + 1):
-        grad_rel = float(np.abs(grad).max()) / scale if grad.size else 0.0
-        if not (math.isfinite(energy) and math.isfinite(grad_rel)):
-            return NewtonOutcome(x, SolverStatus.NOT_FINITE, iteration, grad_rel, step_norm)
-        step, min_eig = problem.step(grad, hess)
-        step_norm = float(np.abs(step).max()) if step.size else 0.0
-        if not math.isfinite(step_norm):
-            return NewtonOutcome(x, SolverStatus.NOT_FINITE, iteration, grad_rel, step_norm)
-        if grad_rel <= options.gtol and step_norm <= options.xtol:
-            status = SolverStatus.SUCCESS if min_eig > 0.0 else SolverStatus.UNSTABLE
-            return NewtonOutcome(x + step, status, iteration, grad_rel, step_norm, min_eig)
-        ratio = float(np.max(np.abs(step) / cap))
-        if ratio > 1.0:
-            step = step / ratio
-        slope = float(np.vdot(grad, step))
-        if not slope < 0.0:
-            step, slope = -grad / scale, -float(np.vdot(grad, grad)) / scale
-        trial = x + step
-        e_trial, g_trial, h_trial = problem.derivatives(trial, pressure, loads)
-        flat = -slope <= options.flat_slope * (abs(energy) + options.energy_scale)
-        if e_trial <= energy + options.armijo * slope or flat:
-            x, energy, grad, hess = trial, e_trial, g_trial, h_trial
-            step_norm = float(np.abs(step).max())
-            continue
-        alpha = 0.5
-        while True:
-            trial = x + alpha * step
-            if problem.energy(trial, pressure, loads) <= energy + options.armijo * alpha * slope:
-                break
-            alpha *= 0.5
-            if alpha < 1e-10:
-                return NewtonOutcome(x, SolverStatus.LINE_SEARCH_FAILED, iteration, grad_rel,
-                                     step_norm, min_eig)
-        x = trial
-        step_norm = alpha * float(np.abs(step).max())
-        energy, grad, hess = problem.derivatives(x, pressure, loads)
-    return NewtonOutcome(x, SolverStatus.MAX_ITERATIONS, options.max_iterations, grad_rel,
-                         step_norm)
-
-
-def _scaled(loads, lam):
-    return [(node, lam * np.asarray(force, dtype=float)) for node, force in loads]
+    x = np.ascontiguousarray(x, dtype=float)
+    nodes, forces = kernels.load_arrays(loads)
+    opts, cap = _packed(problem, options, x.shape)
+    data = _compiled(problem, bool(loads))
+    if data is None:
+        return _outcome(_newton(problem, x, pressure, nodes, forces, opts, cap), problem)
+    return _outcome(_newton_entry(data, x, float(pressure), nodes, forces, opts, cap), problem)
 
 
 def solve(problem, pressure, loads, options, initial=None):
@@ -196,89 +574,17 @@ def solve(problem, pressure, loads, options, initial=None):
         fraction of the loading reached.
 
     """
-    spent = 0
-    if initial is not None:
-        warm = newton(problem, initial, pressure, loads, options)
-        if warm.status is SolverStatus.SUCCESS:
-            return warm
-        spent = warm.iterations
-    flat = problem.flat()
-    cold = newton(problem, flat, pressure, loads, options)
-    spent += cold.iterations
-    if cold.status in (SolverStatus.SUCCESS, SolverStatus.UNSTABLE):
-        return _with_iterations(cold, spent)
-    start = newton(problem, flat, 0.0, [], options)
-    spent += start.iterations
-    if start.status is not SolverStatus.SUCCESS:
-        return NewtonOutcome(start.x, SolverStatus.CONTINUATION_FAILED, spent, math.inf,
-                             math.inf, fraction=0.0)
-    x, lam, dlam = start.x, 0.0, 0.25
-    while True:
-        target = min(1.0, lam + dlam)
-        sub = newton(problem, x, target * pressure, _scaled(loads, target), options)
-        spent += sub.iterations
-        if sub.status is SolverStatus.SUCCESS:
-            x, lam = sub.x, target
-            dlam = min(2.0 * dlam, 1.0)
-            if lam >= 1.0:
-                return _with_iterations(sub, spent)
-        else:
-            dlam *= 0.5
-            if dlam < 1.0 / 256:
-                return NewtonOutcome(x, SolverStatus.CONTINUATION_FAILED, spent, sub.gradient,
-                                     sub.step, fraction=lam)
-
-
-def _with_iterations(outcome, iterations):
-    return NewtonOutcome(outcome.x, outcome.status, iterations, outcome.gradient, outcome.step,
-                         outcome.min_eig, outcome.fraction)
-
-
-@dataclass(frozen=True)
-class BorderedOutcome:
-    """Loaded state of a displacement-controlled solve (internal)."""
-
-    x: np.ndarray
-    force: float
-    success: bool
-    iterations: int
-    fraction: float
-    stable: bool
-    gradient: float
-
-
-def _bordered_newton(problem, x, force, pressure, node, direction, target, options):
-    """Solve grad Pi(x; f e) = 0 and e . O_node(x) = target for (x, f) by Newton."""
-    scale = problem.gradient_scale
-    for iteration in range(1, options.max_iterations + 1):
-        _, residual, hess = problem.derivatives(x, pressure, [(node, force * direction)])
-        position, jacobian = problem.node_jacobian(x, node)
-        # The potential of a unit load along e is -e . O: its gradient borders the system.
-        border = -np.tensordot(direction, jacobian, axes=1)
-        gap = float(direction @ position) - target
-        try:
-            a = problem.solve_linear(hess, -residual)
-            b = problem.solve_linear(hess, border)
-        except np.linalg.LinAlgError:
-            return x, force, False, iteration
-        denominator = float(np.vdot(border, b))
-        if not (math.isfinite(denominator) and denominator != 0.0):
-            return x, force, False, iteration
-        # H dx + border df = -r and border . dx = gap.
-        dforce = (float(np.vdot(border, a)) - gap) / denominator
-        dx = a - dforce * b
-        step = float(np.abs(dx).max()) if dx.size else 0.0
-        if not (math.isfinite(step) and math.isfinite(dforce)):
-            return x, force, False, iteration
-        if float(np.max(np.abs(dx) / options.max_step)) > 1.0:
-            return x, force, False, iteration
-        x = x + dx
-        force = force + dforce
-        balanced = not math.isfinite(options.gtol) or \
-            float(np.abs(residual).max()) / scale <= options.gtol
-        if balanced and step <= options.xtol and abs(gap) <= 1e-12 * max(abs(target), 1e-3):
-            return x, force, True, iteration
-    return x, force, False, options.max_iterations
+    flat = _flat(problem)
+    warm = initial is not None
+    start = np.ascontiguousarray(initial, dtype=float) if warm else flat
+    nodes, forces = kernels.load_arrays(loads)
+    opts, cap = _packed(problem, options, flat.shape)
+    data = _compiled(problem, bool(loads))
+    if data is None:
+        out = _solve(problem, start, warm, flat, pressure, nodes, forces, opts, cap)
+    else:
+        out = _solve_entry(data, start, warm, flat, float(pressure), nodes, forces, opts, cap)
+    return _outcome(out, problem)
 
 
 def rigidity(problem, unloaded_x, pressure, node, direction, displacement, options):
@@ -315,22 +621,16 @@ def rigidity(problem, unloaded_x, pressure, node, direction, displacement, optio
     Zhou, Headings, Dapino (2022), eq. (22); docs/physics.md, section 10.
 
     """
-    x, force = unloaded_x, 0.0
-    start = float(direction @ problem.node_jacobian(x, node)[0])
-    done, iterations, increment = 0.0, 0, 1.0
-    while done < 1.0:
-        goal = min(1.0, done + increment)
-        x_new, f_new, ok, its = _bordered_newton(problem, x, force, pressure, node, direction,
-                                                 start + goal * displacement, options)
-        iterations += its
-        if ok:
-            x, force, done = x_new, f_new, goal
-            increment = min(1.0, 2.0 * increment)
-        else:
-            increment *= 0.5
-            if increment < 1.0 / 64:
-                return BorderedOutcome(x, force, False, iterations, done, False, math.inf)
-    _, grad, hess = problem.derivatives(x, pressure, [(node, force * direction)])
-    _, min_eig = problem.step(grad, hess)
-    return BorderedOutcome(x, force, True, iterations, 1.0, min_eig > 0.0,
-                           float(np.abs(grad).max()) / problem.gradient_scale)
+    x = np.ascontiguousarray(unloaded_x, dtype=float)
+    direction = np.ascontiguousarray(direction, dtype=float)
+    opts, cap = _packed(problem, options, x.shape)
+    data = _compiled(problem, True)
+    if data is None:
+        out = _rigidity(problem, x, pressure, int(node), direction, float(displacement), opts,
+                        cap)
+    else:
+        out = _rigidity_entry(data, x, float(pressure), int(node), direction,
+                              float(displacement), opts, cap)
+    x, force, success, iterations, fraction, stable, gradient = out
+    return BorderedOutcome(x, float(force), bool(success), int(iterations), float(fraction),
+                           bool(stable), float(gradient))

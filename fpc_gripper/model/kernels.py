@@ -1,5 +1,6 @@
 """Compiled (numba) drop-in equivalents of the CCM energy, kinematics and Newton step."""
 
+import collections
 import functools
 import math
 
@@ -717,11 +718,17 @@ def newton_step_dense(grad, hess, floor):
         1.0 when the Hessian is positive definite, else its smallest eigenvalue.
 
     """
+    # A 4 N system is large enough that LAPACK's blocked factorisation beats loops.
+    low, definite = _dense_cholesky(hess)
+    return _factored_step(grad, hess, low, definite, floor)
+
+
+@_jit
+def _factored_step(grad, hess, low, definite, floor):
+    """`newton_step_dense` given the Cholesky factor of hess (when `definite`)."""
     n = hess.shape[0]
     rhs = -grad
     out = np.empty(n)
-    # A 4 N system is large enough that LAPACK's blocked factorisation beats loops.
-    low, definite = _dense_cholesky(hess)
     if definite:
         _cholesky_substitute(low, rhs, out)
         return out, 1.0
@@ -757,3 +764,158 @@ def newton_step(grad, hess, floor=EIGEN_FLOOR):
         return newton_step_blocks(grad, hess, float(floor))
     step, min_eig = newton_step_dense(grad.ravel(), hess, float(floor))
     return step.reshape(grad.shape), min_eig
+
+
+# -- the engine's discretisation: CCM-N as a namedtuple of arrays ----------------------------
+_CCM_FIELDS = ('stiffness', 'gas_volume', 'gas_moments', 'pemc_basis', 'pemc_weights',
+               'pemc_products', 'prestrain', 'law', 'pressure_coefficient', 'lengths',
+               'consistent')
+#: CCM-N unloaded: (N, 4, 4) Hessian blocks. `engine` runs its loops compiled on it.
+CCMBlocks = collections.namedtuple('CCMBlocks', _CCM_FIELDS)
+#: CCM-N with point loads: dense (4N, 4N) Hessian (the chained frames couple every segment).
+CCMDense = collections.namedtuple('CCMDense', _CCM_FIELDS)
+
+
+def ccm_data(seg, prestrain, emc, pressure_coefficient, consistent, loaded):
+    """
+    The CCM as the engine's compiled discretisation (`CCMDense` if loaded, else `CCMBlocks`).
+
+    Parameters
+    ----------
+    seg : SegmentData
+    prestrain : float
+        [-].
+    emc : tuple of float
+        PEMC stress law (a1..a4) [Pa].
+    pressure_coefficient : float
+        k_p [-].
+    consistent : bool
+        The 'consistent' reconstruction (`consistent_strain_map`) instead of the paper's.
+    loaded : bool
+
+    """
+    kind = CCMDense if loaded else CCMBlocks
+    return kind(seg.stiffness, seg.gas_volume, seg.gas_moments, seg.pemc_basis,
+                seg.pemc_weights, seg.pemc_products, float(prestrain), _law_matrix(emc),
+                float(pressure_coefficient), seg.lengths, bool(consistent))
+
+
+@_jit
+def _ccm_segment_terms(p, q, pressure):
+    """Segment energy [J], gradient (N, 4) and Hessian blocks (N, 4, 4) in the unknowns q."""
+    work = p.pressure_coefficient * pressure
+    if not p.consistent:
+        energy, grad, hess = segment_derivatives_kernel(
+            q, p.stiffness, p.gas_volume, p.gas_moments, p.pemc_basis, p.pemc_products,
+            p.prestrain, p.law, work)
+        return energy.sum(), grad, hess
+    qs, jac, hess3 = consistent_strain_map_kernel(q)
+    energy, g_s, h_s = segment_derivatives_kernel(
+        qs, p.stiffness, p.gas_volume, p.gas_moments, p.pemc_basis, p.pemc_products,
+        p.prestrain, p.law, work)
+    n = q.shape[0]
+    grad = np.zeros((n, 4))
+    hess = np.zeros((n, 4, 4))
+    for i in range(n):
+        for b in range(4):
+            acc = 0.0
+            for a in range(4):
+                acc += g_s[i, a] * jac[i, a, b]
+            grad[i, b] = acc
+        for a in range(4):
+            for b in range(4):
+                acc = g_s[i, 3] * hess3[i, a, b]
+                for c in range(4):
+                    for d in range(4):
+                        acc += jac[i, c, a] * h_s[i, c, d] * jac[i, d, b]
+                hess[i, a, b] = acc
+    return energy.sum(), grad, hess
+
+
+@_jit
+def ccm_energy(p, q, pressure, nodes, forces):
+    """Total potential [J] of the CCM at scaled unknowns q (N, 4)."""
+    qs = q if not p.consistent else consistent_strain_map_kernel(q)[0]
+    energy = segment_energy_kernel(qs, p.stiffness, p.gas_volume, p.gas_moments, p.pemc_basis,
+                                   p.pemc_weights, p.prestrain, p.law,
+                                   p.pressure_coefficient * pressure).sum()
+    return energy + load_energy_kernel(q, p.lengths, nodes, forces)
+
+
+@_jit
+def ccm_blocks_derivatives(p, q, pressure, nodes, forces):
+    """Energy [J], gradient (N, 4) and Hessian blocks (N, 4, 4) of the unloaded CCM."""
+    return _ccm_segment_terms(p, q, pressure)
+
+
+@_jit
+def ccm_dense_derivatives(p, q, pressure, nodes, forces):
+    """
+    Energy [J], gradient (N, 4) and Hessian of the CCM with point loads.
+
+    The Hessian is (H (4N, 4N), its Cholesky factor, whether H is positive definite).
+    """
+    energy, grad, blocks = _ccm_segment_terms(p, q, pressure)
+    e_load, g_load, hess = load_derivatives_kernel(q, p.lengths, nodes, forces)
+    n = q.shape[0]
+    for i in range(n):
+        for a in range(4):
+            for b in range(4):
+                hess[4 * i + a, 4 * i + b] += blocks[i, a, b]
+    # The Newton step and the bordered solves all need the factor: once, here.
+    low, definite = _dense_cholesky(hess)
+    return energy + e_load, grad + g_load, (hess, low, definite)
+
+
+@_jit
+def ccm_blocks_step(p, grad, hess):
+    """Newton step (N, 4) and smallest eigenvalue (1.0 if PD) for Hessian blocks."""
+    return newton_step_blocks(grad, hess, EIGEN_FLOOR)
+
+
+@_jit
+def ccm_dense_step(p, grad, hess):
+    """Newton step (N, 4) and smallest eigenvalue (1.0 if PD) for a dense Hessian."""
+    matrix, low, definite = hess
+    step, min_eig = _factored_step(grad.ravel(), matrix, low, definite, EIGEN_FLOOR)
+    return step.reshape(grad.shape), min_eig
+
+
+@_jit
+def ccm_blocks_solve_linear(p, hess, rhs):
+    """Solve the block system H x = rhs (N, 4): (x, True), or (rhs, False) if singular."""
+    out = np.empty_like(rhs)
+    try:
+        for i in range(rhs.shape[0]):
+            out[i] = np.linalg.solve(hess[i], rhs[i])
+    except Exception:
+        return rhs.copy(), False
+    return out, True
+
+
+@_jit
+def ccm_dense_solve_linear(p, hess, rhs):
+    """Solve the dense system H x = rhs (N, 4): (x, True), or (rhs, False) if singular."""
+    matrix, low, definite = hess
+    if definite:
+        out = np.empty(rhs.size)
+        _cholesky_substitute(low, rhs.ravel(), out)
+        return out.reshape(rhs.shape), True
+    try:
+        return np.linalg.solve(matrix, rhs.ravel()).reshape(rhs.shape), True
+    except Exception:
+        return rhs.copy(), False
+
+
+@_jit
+def ccm_node_jacobian(p, q, node):
+    """Position (2,) of a chain node [m] and its derivatives (2, N, 4)."""
+    return node_jacobian_kernel(q, p.lengths, node)
+
+
+CCMBlocks._kernels = {'derivatives': ccm_blocks_derivatives, 'energy': ccm_energy,
+                      'step': ccm_blocks_step, 'solve_linear': ccm_blocks_solve_linear,
+                      'node_jacobian': ccm_node_jacobian}
+CCMDense._kernels = {'derivatives': ccm_dense_derivatives, 'energy': ccm_energy,
+                     'step': ccm_dense_step, 'solve_linear': ccm_dense_solve_linear,
+                     'node_jacobian': ccm_node_jacobian}

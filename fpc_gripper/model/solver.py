@@ -5,14 +5,12 @@ import math
 
 import numpy as np
 
-from . import engine
+from . import engine, kernels
 from .analysis import CircleFitted, flexural_rigidity
 from .design import ActuatorDesign
-from .energy import load_derivatives, load_energy, node_jacobian, segment_derivatives, \
-    segment_energy
+from .energy import node_jacobian
 from .engine import linear_solve, linear_step, NewtonOptions, SolverStatus
-from .kinematics import (consistent_strain_map, from_scaled, midplane_samples, node_positions,
-                         to_scaled)
+from .kinematics import from_scaled, midplane_samples, node_positions, to_scaled
 from .section import build_segments, uniform_edges
 from .validation import real_number
 
@@ -93,13 +91,21 @@ class CCMResult(CircleFitted):
         self.pressure = float(pressure)
         self.tip_force = tuple(float(f) for f in tip_force)
         self.point_loads = tuple(loads)
-        self.rotation_measure = np.abs(2.0 * q[:, 3])
-        self.valid = bool(np.all(self.rotation_measure < 1.0))
         # Derived fields are built on first use: a controller polling tips pays for
         # neither the message nor the coefficients it does not read.
         self._message_args = dict(grad=gradient, gtol=solver.gtol, step=step,
                                   xtol=solver.xtol, iterations=iterations, min_eig=min_eig,
                                   fraction=fraction)
+
+    @functools.cached_property
+    def rotation_measure(self):
+        """|2 d L_i| of every segment, shape (N,): the small-rotation rule wants < 1."""
+        return np.abs(2.0 * self.q[:, 3])
+
+    @functools.cached_property
+    def valid(self):
+        """Every segment obeys the small-rotation rule |2 d L_i| < 1."""
+        return bool(np.all(self.rotation_measure < 1.0))
 
     @functools.cached_property
     def message(self):
@@ -290,35 +296,17 @@ class CCMSolver:
         self._options = NewtonOptions(max_iterations=self.max_iterations, gtol=self.gtol,
                                       xtol=self.xtol, max_step=_MAX_STEP,
                                       energy_scale=self.gradient_scale)
-        self._params = (design.prestrain, design.emc_coefficients)
+        # The compiled discretisations the engine runs: unloaded (block Hessian), loaded.
+        self._data = {loaded: kernels.ccm_data(self.segments, design.prestrain,
+                                               design.emc_coefficients,
+                                               self.pressure_coefficient,
+                                               reconstruction == 'consistent', loaded)
+                      for loaded in (False, True)}
 
     # -- energy -----------------------------------------------------------
     def _total_energy(self, q, pressure, loads):
-        work = self.pressure_coefficient * pressure
-        qs = q if self.reconstruction == 'paper' else consistent_strain_map(q)[0]
-        energy = segment_energy(qs, self.segments, *self._params, work).sum()
-        return energy + load_energy(q, self.segments.lengths, loads)
-
-    def _derivatives(self, q, pressure, loads):
-        """Energy, gradient (N, 4) and Hessian: (N, 4, 4) blocks or dense (4N, 4N)."""
-        work = self.pressure_coefficient * pressure
-        if self.reconstruction == 'paper':
-            energy, grad, hess = segment_derivatives(q, self.segments, *self._params, work)
-        else:
-            qs, jac, hess3 = consistent_strain_map(q)
-            energy, g_s, h_s = segment_derivatives(qs, self.segments, *self._params, work)
-            grad = np.matmul(g_s[:, None, :], jac)[:, 0, :]
-            hess = np.matmul(jac.transpose(0, 2, 1), np.matmul(h_s, jac))
-            hess += g_s[:, 3, None, None] * hess3
-        energy = energy.sum()
-        if not loads:
-            return energy, grad, hess
-        e_load, g_load, h_load = load_derivatives(q, self.segments.lengths, loads)
-        n = q.shape[0]
-        idx = np.arange(n)
-        dense = h_load.reshape(n, 4, n, 4)
-        dense[idx, :, idx, :] += hess
-        return energy + e_load, grad + g_load, dense.reshape(4 * n, 4 * n)
+        return kernels.ccm_energy(self._data[False], np.ascontiguousarray(q, dtype=float),
+                                  float(pressure), *kernels.load_arrays(loads))
 
     def _loads(self, tip_force, point_loads):
         """Convert the tip force and (s, fx, fz) point loads to (node index, force) pairs."""
@@ -351,10 +339,21 @@ class CCMSolver:
 
     def derivatives(self, q, pressure, loads):
         """Energy [J], gradient (N, 4) and Hessian ((N, 4, 4) blocks, or dense when loaded)."""
-        return self._derivatives(q, pressure, loads)
+        data = self._data[bool(loads)]
+        energy, grad, hess = data._kernels['derivatives'](
+            data, np.ascontiguousarray(q, dtype=float), float(pressure),
+            *kernels.load_arrays(loads))
+        return energy, grad, hess[0] if loads else hess
 
-    step = staticmethod(linear_step)
+    def step(self, grad, hess):
+        """Newton step (N, 4) and the smallest eigenvalue (1.0 when H is positive definite)."""
+        return linear_step(grad, hess)
+
     solve_linear = staticmethod(linear_solve)
+
+    def kernel_data(self, loaded):
+        """The compiled discretisation the engine runs (`kernels.ccm_data`)."""
+        return self._data[bool(loaded)]
 
     def node_jacobian(self, q, node):
         """Position of a node [m] and its derivatives in the scaled unknowns, (2, N, 4)."""
@@ -415,7 +414,8 @@ class CCMSolver:
         pressure = real_number('pressure', pressure, '[Pa]')
         if pressure < 0.0:
             raise ValueError(f'`pressure` must be >= 0 (gauge) [Pa], got {pressure}')
-        if np.shape(tip_force) != (2,):
+        if not (isinstance(tip_force, tuple) and len(tip_force) == 2) \
+                and np.shape(tip_force) != (2,):
             raise ValueError(f'`tip_force` must be (f0, p0) [N], got {tip_force!r}')
         loads = self._loads(tip_force, point_loads)
         out = engine.solve(self, pressure, loads, self._options, self._initial_state(initial))

@@ -17,10 +17,10 @@ def _assembled(solver, pressure, loads):
         return solver._total_energy(x.reshape(n, 4), pressure, loads)
 
     def gradient(x):
-        return solver._derivatives(x.reshape(n, 4), pressure, loads)[1].ravel()
+        return solver.derivatives(x.reshape(n, 4), pressure, loads)[1].ravel()
 
     def hessian(x):
-        h = solver._derivatives(x.reshape(n, 4), pressure, loads)[2]
+        h = solver.derivatives(x.reshape(n, 4), pressure, loads)[2]
         if h.ndim == 3:
             dense = np.zeros((4 * n, 4 * n))
             for i in range(n):

@@ -154,11 +154,11 @@ def test_consistent_reconstruction_derivatives_and_round_trip():
     x = np.random.default_rng(0).normal(scale=0.1, size=16)
 
     def gradient(v):
-        return solver._derivatives(v.reshape(4, 4), 150e3, loads)[1].ravel()
+        return solver.derivatives(v.reshape(4, 4), 150e3, loads)[1].ravel()
 
     g_fd = approx_derivative(lambda v: solver._total_energy(v.reshape(4, 4), 150e3, loads), x)
     np.testing.assert_allclose(gradient(x), g_fd, rtol=1e-6, atol=1e-7 * np.abs(g_fd).max())
-    hess = solver._derivatives(x.reshape(4, 4), 150e3, loads)[2]
+    hess = solver.derivatives(x.reshape(4, 4), 150e3, loads)[2]
     np.testing.assert_allclose(hess, approx_derivative(gradient, x), rtol=1e-6,
                                atol=1e-7 * np.abs(hess).max())
     assert CCMSolver(design).reconstruction == 'paper'

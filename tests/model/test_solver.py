@@ -104,7 +104,7 @@ def test_buckling_load_reports_failure_or_an_honest_state():
     s = CCMSolver(ActuatorDesign.paper(prestrain=0.05), 4)
     result = s.solve(0.0, tip_force=(-5.0, 0.0))
     if result.success:
-        _, grad, _ = s._derivatives(result.q, 0.0, result.point_loads)
+        _, grad, _ = s.derivatives(result.q, 0.0, result.point_loads)
         assert np.abs(grad).max() / s.gradient_scale < 1e-8
     else:
         assert result.message
