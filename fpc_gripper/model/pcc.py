@@ -1,7 +1,6 @@
 """Piecewise-constant-strain rod (PCC): the finger as N exact arcs, solved with a banded Newton."""
 
 import numpy as np
-from scipy.linalg import cho_solve_banded, cholesky_banded, eig_banded, LinAlgError, solve_banded
 
 from . import pcc_kernels as kernels
 from .engine import NewtonOptions
@@ -19,8 +18,6 @@ _UNPACK = np.array([2, 0, 1])
 #: No loads, as the kernels take them.
 _NO_NODES = np.zeros(0, dtype=np.int64)
 _NO_FORCES = np.zeros((0, 2))
-#: `_Banded.factor` of a Hessian that is not positive definite.
-_INDEFINITE = False
 
 
 def half_angle_sinc(delta, order=2):
@@ -98,25 +95,24 @@ class _Banded:
     """
     Symmetric banded Hessian: lower form ab[d, k] = H[k + d, k], d = 0..3 [J].
 
-    `lower` is read only. `factor` is its banded Cholesky factor (`_INDEFINITE` where H
-    is not positive definite, None until needed); `derivatives` also keeps the Newton
-    step of its own gradient, which the first `step` with that gradient hands out.
+    `hook` is the Hessian as the compiled kernels take it: (lower, Cholesky factor,
+    Newton step of the gradient it was computed with, positive definite).
     """
 
-    __slots__ = ('lower', 'factor', '_gradient', '_step')
+    __slots__ = ('hook',)
 
-    def __init__(self, lower, factor=None, gradient=None, step=None):
-        self.lower = lower
-        self.factor = factor
-        self._gradient = gradient
-        self._step = step
+    def __init__(self, hook):
+        self.hook = hook
 
-    def cholesky(self):
-        """Return the banded Cholesky factor (computed once), or `_INDEFINITE`."""
-        if self.factor is None:
-            factor, definite = kernels.banded_cholesky(self.lower)
-            self.factor = factor if definite else _INDEFINITE
-        return self.factor
+    @property
+    def lower(self):
+        """The lower band, shape (4, n) [J]."""
+        return self.hook[0]
+
+    @property
+    def definite(self):
+        """Whether H is positive definite."""
+        return bool(self.hook[3])
 
     def full_band(self):
         """Return the (7, n) general band form of `solve_banded` with (l, u) = (3, 3)."""
@@ -130,14 +126,7 @@ class _Banded:
 
     def dense(self):
         """Return the full (n, n) matrix (tests and diagnostics)."""
-        lower = self.lower
-        n = lower.shape[1]
-        out = np.zeros((n, n))
-        for d in range(4):
-            k = np.arange(n - d)
-            out[k + d, k] = lower[d, :n - d]
-            out[k, k + d] = lower[d, :n - d]
-        return out
+        return kernels._dense_from_band(self.lower)
 
 
 class PCCSolver(_LadderSolver):
@@ -180,13 +169,14 @@ class PCCSolver(_LadderSolver):
     Notes
     -----
     The energy, gradient, banded Hessian, chords, node Jacobian and outputs are
-    compiled kernels (`pcc_kernels`); Python only passes them the solver's arrays.
+    compiled kernels (`pcc_kernels`), and `kernel_data` hands them to the engine, whose
+    loops then run compiled too; Python only builds the result.
     Newton steps solve the banded system by Cholesky (compiled, LAPACK's dpbtf2
     algorithm). Where the Hessian H is not positive definite the step solves
     (H + tau D) dx = -g with D = |diag H| and tau = 2 |lambda_min| of the Jacobi-scaled
-    Hessian D^(-1/2) H D^(-1/2) (a banded eigenvalue solve, `scipy.linalg.eig_banded`),
-    which is positive definite (its smallest eigenvalue is |lambda_min|), so the step
-    descends; that lambda_min < 0 is reported for the stability verdict. The engine
+    Hessian D^(-1/2) H D^(-1/2) (`pcc_kernels.shifted_step`; a dense eigenvalue solve,
+    rare), which is positive definite (its smallest eigenvalue is |lambda_min|), so the
+    step descends; that lambda_min < 0 is reported for the stability verdict. The engine
     then backtracks as for every rung.
 
     References
@@ -222,6 +212,8 @@ class PCCSolver(_LadderSolver):
         self._options = NewtonOptions(max_iterations=self.max_iterations, xtol=self.tol,
                                       max_step=np.tile(_CAP, n),
                                       energy_scale=self.gradient_scale)
+        self._data = kernels.PCCData(self.lengths, self._stiffness, self._gas, self._pemc,
+                                     float(self.pressure_coefficient), self.gradient_scale)
 
     def _compatible(self, other):
         return isinstance(other, PCCSolver) and np.array_equal(other.edges, self.edges)
@@ -251,12 +243,14 @@ class PCCSolver(_LadderSolver):
             forces[k] = force
         return nodes, forces
 
+    def kernel_data(self, loaded):
+        """The compiled discretisation the engine runs (`pcc_kernels.PCCData`)."""
+        return self._data
+
     def energy(self, x, pressure, loads):
         """Total potential [J] at engine unknowns `x`."""
-        return kernels.energy_kernel(np.ascontiguousarray(x, dtype=float), self.lengths,
-                                     self._stiffness, self._gas, self._pemc,
-                                     self.pressure_coefficient * pressure,
-                                     *self._load_arrays(loads))
+        return kernels.pcc_energy(self._data, np.ascontiguousarray(x, dtype=float),
+                                  float(pressure), *self._load_arrays(loads))
 
     def derivatives(self, x, pressure, loads):
         """
@@ -269,15 +263,13 @@ class PCCSolver(_LadderSolver):
         gradient : ndarray, shape (3 N,)
             In (eps_i, c1_i, theta_i) per segment [J].
         hessian : _Banded
-            Lower band (4, 3 N) of the exact Hessian [J].
+            Lower band (4, 3 N) of the exact Hessian [J], with its Cholesky factor.
 
         """
-        energy, grad, lower, factor, step, definite = kernels.derivatives_kernel(
-            np.ascontiguousarray(x, dtype=float), self.lengths, self._stiffness, self._gas,
-            self._pemc, self.pressure_coefficient * pressure, *self._load_arrays(loads))
-        if definite:
-            return energy, grad, _Banded(lower, factor, grad, step)
-        return energy, grad, _Banded(lower, _INDEFINITE)
+        energy, grad, hook = kernels.pcc_derivatives(
+            self._data, np.ascontiguousarray(x, dtype=float), float(pressure),
+            *self._load_arrays(loads))
+        return energy, grad, _Banded(hook)
 
     def step(self, grad, hess):
         """
@@ -288,57 +280,27 @@ class PCCSolver(_LadderSolver):
         step : ndarray, shape (3 N,)
         min_eig : float
             1.0 when H is positive definite, else the smallest eigenvalue of the
-            Jacobi-scaled Hessian (< 0).
+            Jacobi-scaled Hessian (< 0); see `pcc_kernels.shifted_step`.
 
         """
-        if grad is hess._gradient and hess._step is not None:
-            # The step `derivatives` computed with the factor; handed out once, as each
-            # call's answer is the caller's to keep.
-            step, hess._step = hess._step, None
-            return step, 1.0
-        factor = hess.cholesky()
-        if factor is not _INDEFINITE:
-            return kernels.cholesky_solve(factor, -np.ascontiguousarray(grad, dtype=float)), 1.0
-        # Indefinite: rare (buckling, far from equilibrium), left to scipy's banded solvers.
-        return self._shifted_step(np.asarray(grad, dtype=float), hess.lower)
-
-    def _shifted_step(self, grad, lower):
-        """Step (H + tau D) dx = -g of an indefinite H and the scaled lambda_min (< 0)."""
-        diag = np.maximum(np.abs(lower[0]), 1e-300)
-        root = np.sqrt(diag)
-        n = diag.size
-        scaled = lower.copy()
-        for d in range(4):
-            scaled[d, :n - d] /= root[d:] * root[:n - d]
-        if not np.all(np.isfinite(scaled)):
-            return np.full(n, np.nan), -1.0
-        min_eig = float(eig_banded(scaled, lower=True, eigvals_only=True, select='i',
-                                   select_range=(0, 0), check_finite=False)[0])
-        shift = 2.0 * abs(min_eig) + 1e-10
-        for _ in range(60):
-            try:
-                trial = scaled.copy()
-                trial[0] += shift
-                factor = cholesky_banded(trial, lower=True, check_finite=False)
-                break
-            except LinAlgError:
-                shift *= 2.0
-        else:
-            return -grad / self.gradient_scale, min(min_eig, -1e-300)
-        dx = cho_solve_banded((factor, True), -grad / root, check_finite=False) / root
-        return dx, min(min_eig, -1e-300)
+        grad = np.ascontiguousarray(grad, dtype=float)
+        lower, factor, _, definite = hess.hook
+        if definite:
+            return kernels.cholesky_solve(factor, -grad), 1.0
+        return kernels.shifted_step(lower, grad, self.gradient_scale)
 
     def solve_linear(self, hess, rhs):
-        """Solve H x = rhs (banded Cholesky, else banded LU); LinAlgError if singular."""
-        factor = hess.cholesky()
-        if factor is _INDEFINITE:
-            return solve_banded((3, 3), hess.full_band(), rhs, check_finite=False)
+        """Solve H x = rhs (banded Cholesky, else LU); LinAlgError if singular."""
         rhs = np.asarray(rhs, dtype=float)
-        if rhs.ndim == 1:
-            return kernels.cholesky_solve(factor, np.ascontiguousarray(rhs))
-        return np.stack([kernels.cholesky_solve(factor, np.ascontiguousarray(column))
-                         for column in rhs.reshape(rhs.shape[0], -1).T],
-                        axis=1).reshape(rhs.shape)
+        columns = rhs.reshape(rhs.shape[0], -1).T
+        out = []
+        for column in columns:
+            solution, ok = kernels.pcc_solve_linear(self._data, hess.hook,
+                                                    np.ascontiguousarray(column))
+            if not ok:
+                raise np.linalg.LinAlgError('the PCC Hessian is singular')
+            out.append(solution)
+        return np.stack(out, axis=1).reshape(rhs.shape)
 
     def nodes(self, x):
         """Segment ends O_0 = 0 .. O_N = tip [m], (N + 1, 2), at engine unknowns `x`."""

@@ -1,5 +1,6 @@
 """Compiled (numba) kernels of the PCC rod: section law, chords, banded derivatives and steps."""
 
+import collections
 import math
 
 import numba
@@ -7,7 +8,9 @@ import numpy as np
 
 __all__ = ['section_arrays', 'half_angle_sinc_kernel', 'energy_kernel', 'derivatives_kernel',
            'banded_cholesky', 'cholesky_solve', 'newton_step_kernel', 'nodes_kernel',
-           'node_jacobian_kernel', 'outputs_kernel', 'BANDWIDTH']
+           'node_jacobian_kernel', 'outputs_kernel', 'BANDWIDTH', 'PCCData', 'shifted_step',
+           'pcc_derivatives', 'pcc_energy', 'pcc_step', 'pcc_solve_linear',
+           'pcc_node_jacobian']
 
 # Compiled once per argument types and kept on disk; nogil lets a caller thread the solves.
 _jit = numba.njit(cache=True, nogil=True)
@@ -580,3 +583,112 @@ def outputs_kernel(state, lengths, stiffness, gas, pemc, work, tip_force, sample
     energy = energy_kernel(x, lengths, stiffness, gas, pemc, work, tip,
                            tip_force.reshape(1, 2))
     return nodes, points, tangent, strains, beta, coefficients, energy
+
+
+# -- the engine's discretisation: the PCC rod as a namedtuple of arrays -----------------------
+#: The PCC rod as `engine` runs it compiled: `section_arrays`, the segment lengths [m], k_p
+#: and the gradient scale [J]. Its Hessian is (lower, factor, step, definite) of
+#: `derivatives_kernel`.
+PCCData = collections.namedtuple('PCCData', ('lengths', 'stiffness', 'gas', 'pemc',
+                                             'pressure_coefficient', 'gradient_scale'))
+
+
+@_jit
+def _dense_from_band(lower):
+    """The full (n, n) matrix of a symmetric band in lower form."""
+    n = lower.shape[1]
+    out = np.zeros((n, n))
+    for d in range(BANDWIDTH + 1):
+        for k in range(n - d):
+            out[k + d, k] = lower[d, k]
+            out[k, k + d] = lower[d, k]
+    return out
+
+
+@_jit
+def shifted_step(lower, grad, gradient_scale):
+    """
+    Descent step of an indefinite banded Hessian H, and its scaled lambda_min (< 0).
+
+    Solves (H + tau D) dx = -g with D = |diag H| and tau = 2 |lambda_min| (+1e-10) of the
+    Jacobi-scaled Hessian D^(-1/2) H D^(-1/2), doubling tau until the banded Cholesky
+    succeeds; a gradient step -g / gradient_scale if it never does.
+
+    Returns
+    -------
+    step : ndarray, shape (n,)
+        NaN where the scaled Hessian is not finite.
+    min_eig : float
+        lambda_min of the scaled Hessian, at most -1e-300.
+
+    """
+    n = lower.shape[1]
+    root = np.empty(n)
+    for k in range(n):
+        root[k] = math.sqrt(max(abs(lower[0, k]), 1e-300))
+    scaled = lower.copy()
+    for d in range(BANDWIDTH + 1):
+        for k in range(n - d):
+            scaled[d, k] /= root[k + d] * root[k]
+    if not np.all(np.isfinite(scaled)):
+        return np.full(n, np.nan), -1.0
+    min_eig = min(np.linalg.eigvalsh(_dense_from_band(scaled))[0], -1e-300)
+    shift = 2.0 * abs(min_eig) + 1e-10
+    for _ in range(60):
+        trial = scaled.copy()
+        for k in range(n):
+            trial[0, k] += shift
+        factor, definite = banded_cholesky(trial)
+        if definite:
+            step = -grad / root
+            _substitute(factor, step)
+            return step / root, min_eig
+        shift *= 2.0
+    return -grad / gradient_scale, min_eig
+
+
+@_jit
+def pcc_derivatives(p, x, pressure, nodes, forces):
+    """Energy [J], gradient (3N,) and banded Hessian (lower, factor, step, definite)."""
+    energy, grad, lower, factor, step, definite = derivatives_kernel(
+        x, p.lengths, p.stiffness, p.gas, p.pemc, p.pressure_coefficient * pressure, nodes,
+        forces)
+    return energy, grad, (lower, factor, step, definite)
+
+
+@_jit
+def pcc_energy(p, x, pressure, nodes, forces):
+    """Total potential [J] of the PCC rod at engine unknowns x."""
+    return energy_kernel(x, p.lengths, p.stiffness, p.gas, p.pemc,
+                         p.pressure_coefficient * pressure, nodes, forces)
+
+
+@_jit
+def pcc_step(p, grad, hess):
+    """Newton step by banded Cholesky, or `shifted_step`; and lambda_min (1.0 if PD)."""
+    lower, factor, step, definite = hess
+    if definite:
+        return step, 1.0
+    return shifted_step(lower, grad, p.gradient_scale)
+
+
+@_jit
+def pcc_solve_linear(p, hess, rhs):
+    """Solve H x = rhs (banded Cholesky, else dense LU): (x, True), or (rhs, False)."""
+    lower, factor, _, definite = hess
+    if definite:
+        return cholesky_solve(factor, rhs), True
+    try:
+        return np.linalg.solve(_dense_from_band(lower), rhs), True
+    except Exception:
+        return rhs.copy(), False
+
+
+@_jit
+def pcc_node_jacobian(p, x, node):
+    """Position (2,) of node `node` [m] and its derivatives (2, 3N)."""
+    return node_jacobian_kernel(x, p.lengths, node)
+
+
+PCCData._kernels = {'derivatives': pcc_derivatives, 'energy': pcc_energy, 'step': pcc_step,
+                    'solve_linear': pcc_solve_linear, 'node_jacobian': pcc_node_jacobian}

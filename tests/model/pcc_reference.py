@@ -3,9 +3,9 @@
 import math
 
 import numpy as np
-from scipy.linalg import cho_solve_banded, cholesky_banded, LinAlgError, solve_banded
+from scipy.linalg import cho_solve_banded, cholesky_banded, eig_banded, LinAlgError, solve_banded
 
-from fpc_gripper.model.pcc import _Banded, PCCSolver
+from fpc_gripper.model.pcc import PCCSolver
 
 #: Taylor coefficients (-1)^k / (2k + 1)! of sin(h)/h in h^2, k = 0..9.
 _SINC = np.array([(-1.0) ** k / math.factorial(2 * k + 1) for k in range(10)])
@@ -41,6 +41,32 @@ def _horner(x, coefficients):
         out *= x
         out += c
     return out
+
+
+class Banded:
+    """A symmetric band in lower form, ab[d, k] = H[k + d, k], with scipy's solvers."""
+
+    def __init__(self, lower):
+        self.lower = lower
+
+    def full_band(self):
+        lower = self.lower
+        n = lower.shape[1]
+        band = np.zeros((7, n))
+        band[3:] = lower
+        for d in range(1, 4):
+            band[3 - d, d:] = lower[d, :n - d]
+        return band
+
+    def dense(self):
+        lower = self.lower
+        n = lower.shape[1]
+        out = np.zeros((n, n))
+        for d in range(4):
+            k = np.arange(n - d)
+            out[k + d, k] = lower[d, :n - d]
+            out[k, k + d] = lower[d, :n - d]
+        return out
 
 
 class ReferencePCCSolver(PCCSolver):
@@ -162,7 +188,7 @@ class ReferencePCCSolver(PCCSolver):
         grad[:-1, 2] += ge[1:, 0]
         lower = np.bincount(self._band_index, he.ravel()[self._band_take],
                             minlength=4 * x.size).reshape(4, x.size)
-        return energy, grad.ravel(), _Banded(lower)
+        return energy, grad.ravel(), Banded(lower)
 
     def step(self, grad, hess):
         lower = hess.lower
@@ -171,8 +197,33 @@ class ReferencePCCSolver(PCCSolver):
             return cho_solve_banded((factor, True), -grad, check_finite=False), 1.0
         except LinAlgError:
             pass
-        # The indefinite step is not compiled: the package's own scipy path is the reference.
         return self._shifted_step(np.asarray(grad, dtype=float), lower)
+
+    def _shifted_step(self, grad, lower):
+        """(H + tau D) dx = -g by scipy's banded eigenvalue solver and Cholesky."""
+        diag = np.maximum(np.abs(lower[0]), 1e-300)
+        root = np.sqrt(diag)
+        n = diag.size
+        scaled = lower.copy()
+        for d in range(4):
+            scaled[d, :n - d] /= root[d:] * root[:n - d]
+        if not np.all(np.isfinite(scaled)):
+            return np.full(n, np.nan), -1.0
+        min_eig = float(eig_banded(scaled, lower=True, eigvals_only=True, select='i',
+                                   select_range=(0, 0), check_finite=False)[0])
+        shift = 2.0 * abs(min_eig) + 1e-10
+        for _ in range(60):
+            try:
+                trial = scaled.copy()
+                trial[0] += shift
+                factor = cholesky_banded(trial, lower=True, check_finite=False)
+                break
+            except LinAlgError:
+                shift *= 2.0
+        else:
+            return -grad / self.gradient_scale, min(min_eig, -1e-300)
+        dx = cho_solve_banded((factor, True), -grad / root, check_finite=False) / root
+        return dx, min(min_eig, -1e-300)
 
     def solve_linear(self, hess, rhs):
         try:

@@ -147,7 +147,7 @@ def test_steps_equal_numpy(states):
     for solver, reference, x, pressure, loads, _ in states:
         _, grad, hess = solver.derivatives(x, pressure, loads)
         _, want_grad, want_hess = reference.derivatives(x, pressure, loads)
-        # The step that derivatives computed, handed out once, then solved afresh.
+        # Every step is the caller's own array.
         first, _ = solver.step(grad, hess)
         again, _ = solver.step(grad, hess)
         assert again is not first
