@@ -163,7 +163,7 @@ def _node_jacobian(problem, x, node):
 
 
 def _kernel(problem, name):
-    """The compiled `name` of a namedtuple discretisation type, None for others."""
+    """Return the compiled `name` of a namedtuple discretisation type, None for others."""
     if isinstance(problem, types.BaseNamedTuple):
         return getattr(problem.instance_class, '_kernels', {}).get(name)
     return None
@@ -406,22 +406,26 @@ def _rigidity_entry(problem, x, pressure, node, direction, displacement, options
 
 
 @_jit_parallel
-def _solve_batch_entry(problems, design, pressures, nodes, forces, flat, options, cap):
+def _solve_batch_entry(problems, design, pressures, nodes, forces, flat, options, cap, tip):
     count = pressures.size
     states = np.empty((count,) + flat.shape)
     status = np.empty(count, dtype=np.int64)
     iterations = np.empty(count, dtype=np.int64)
-    figures = np.empty((count, 4))
+    figures = np.empty((count, 6))
     for i in numba.prange(count):
+        problem = problems[design[i]]
         x, code, its, grad, step, eig, fraction = _solve(
-            problems[design[i]], flat, False, flat, pressures[i], nodes, forces[i], options, cap)
+            problem, flat, False, flat, pressures[i], nodes, forces[i], options, cap)
         states[i] = x
         status[i] = code
         iterations[i] = its
+        position = _node_jacobian(problem, x, tip)[0]
         figures[i, 0] = grad
         figures[i, 1] = step
         figures[i, 2] = eig
         figures[i, 3] = fraction
+        figures[i, 4] = position[0]
+        figures[i, 5] = position[1]
     return states, status, iterations, figures
 
 
@@ -433,7 +437,7 @@ def _rigidity_batch_entry(unloaded, loaded, design, pressures, node, direction, 
     states = np.empty((count,) + flat.shape)
     status = np.empty(count, dtype=np.int64)
     iterations = np.empty((count, 2), dtype=np.int64)
-    figures = np.empty((count, 7))
+    figures = np.empty((count, 10))
     nodes = np.zeros(0, dtype=np.int64)
     forces = np.zeros((0, 2))
     for i in numba.prange(count):
@@ -446,31 +450,35 @@ def _rigidity_batch_entry(unloaded, loaded, design, pressures, node, direction, 
         figures[i, 0] = grad
         figures[i, 1] = step
         figures[i, 2] = eig
+        figures[i, 3] = fraction
+        figures[i, 4:] = np.nan
+        iterations[i, 1] = 0
+        states[i] = x
         if code != _SUCCESS:
-            states[i] = x
-            iterations[i, 1] = 0
-            figures[i, 3:] = np.nan
             continue
         y, force, ok, its, done, stable, gradient = _rigidity(
             loaded[d], x, pressures[i], node, direction, displacement, options, cap)
+        position = _node_jacobian(loaded[d], y, node)[0]
         states[i] = y
         iterations[i, 1] = its
-        figures[i, 3] = force if ok else np.nan
-        figures[i, 4] = done
-        figures[i, 5] = 1.0 if stable else 0.0
-        figures[i, 6] = gradient
+        figures[i, 4] = force if ok else np.nan
+        figures[i, 5] = done
+        figures[i, 6] = 1.0 if stable else 0.0
+        figures[i, 7] = gradient
+        figures[i, 8] = position[0]
+        figures[i, 9] = position[1]
     return free, status, states, iterations, figures
 
 
 # -- the engine's Python entry points -------------------------------------------------------
 def _compiled(problem, loaded):
-    """The namedtuple a discretisation runs compiled as (see `kernel_data`), or None."""
+    """Return the namedtuple a discretisation runs compiled as (`kernel_data`), or None."""
     make = getattr(problem, 'kernel_data', None)
     return None if make is None else make(loaded)
 
 
 def _packed(problem, options, shape):
-    """The loops' options and step cap for unknowns of `shape` (once per solver and options)."""
+    """Return the loops' options and step cap for `shape` (once per solver and options)."""
     key = (id(options), shape)
     memo = problem.__dict__.setdefault('_engine_packed', {})
     hit = memo.get(key)
@@ -634,3 +642,169 @@ def rigidity(problem, unloaded_x, pressure, node, direction, displacement, optio
     x, force, success, iterations, fraction, stable, gradient = out
     return BorderedOutcome(x, float(force), bool(success), int(iterations), float(fraction),
                            bool(stable), float(gradient))
+
+
+# -- batches -------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class BatchOutcome:
+    """
+    Equilibria of S independent scenes (internal: `batch` builds its results from it).
+
+    Attributes
+    ----------
+    states : ndarray, shape (S,) + unknowns
+    status : ndarray of int, shape (S,)
+        `SolverStatus` codes.
+    iterations : ndarray of int, shape (S,)
+    gradient, step, min_eig, fraction : ndarray, shape (S,)
+        As in `NewtonOutcome`.
+    tips : ndarray, shape (S, 2)
+        Position of the tip node [m].
+
+    """
+
+    states: np.ndarray
+    status: np.ndarray
+    iterations: np.ndarray
+    gradient: np.ndarray
+    step: np.ndarray
+    min_eig: np.ndarray
+    fraction: np.ndarray
+    tips: np.ndarray
+
+
+@dataclass(frozen=True)
+class BatchRigidity:
+    """
+    Displacement-controlled solves of S scenes (internal; see `rigidity_batch`).
+
+    Attributes
+    ----------
+    unloaded : BatchOutcome
+        The unloaded solves (`tips` of the unloaded states).
+    states : ndarray, shape (S,) + unknowns
+        Loaded states (the unloaded one where that failed).
+    force : ndarray, shape (S,)
+        End load magnitude along the direction [N]; NaN where not found.
+    iterations : ndarray of int, shape (S,)
+        Bordered Newton iterations.
+    fraction : ndarray, shape (S,)
+        Fraction of the displacement reached.
+    stable : ndarray of bool, shape (S,)
+        Loaded state stable under force control.
+    gradient : ndarray, shape (S,)
+        Relative gradient of the loaded state.
+    tips : ndarray, shape (S, 2)
+        Loaded tip [m]; NaN where not found.
+
+    """
+
+    unloaded: BatchOutcome
+    states: np.ndarray
+    force: np.ndarray
+    iterations: np.ndarray
+    fraction: np.ndarray
+    stable: np.ndarray
+    gradient: np.ndarray
+    tips: np.ndarray
+
+
+def _batch_inputs(problems, loaded, options):
+    """Typed list of compiled discretisations, flat state, options and cap; checks them."""
+    datas = [_compiled(problem, loaded) for problem in problems]
+    if not datas or any(data is None for data in datas):
+        raise TypeError('a batch needs discretisations that run compiled (`kernel_data`)')
+    flat = _flat(problems[0])
+    opts, cap = _packed(problems[0], options, flat.shape)
+    for problem, data in zip(problems, datas):
+        other = _flat(problem)
+        if type(data) is not type(datas[0]) or other.shape != flat.shape \
+                or _packed(problem, options, flat.shape)[0] != opts \
+                or not np.array_equal(_packed(problem, options, flat.shape)[1], cap):
+            raise ValueError('a batch needs discretisations of one type, size and options')
+    return numba.typed.List(datas), flat, opts, cap
+
+
+def _index(design, pressures, count):
+    design = np.ascontiguousarray(design, dtype=np.int64)
+    pressures = np.ascontiguousarray(pressures, dtype=float)
+    if design.shape != pressures.shape or design.ndim != 1:
+        raise ValueError('`design` and `pressures` must be 1-d of one length, got shapes '
+                         f'{design.shape} and {pressures.shape}')
+    if design.size and not (0 <= design.min() and design.max() < count):
+        raise ValueError(f'`design` indices must lie in [0, {count})')
+    return design, pressures
+
+
+def solve_batch(problems, design, pressures, nodes, forces, options, tip):
+    """
+    Cold solves of S independent scenes in one compiled loop over both cores (`prange`).
+
+    Scene i is `solve(problems[design[i]], pressures[i], loads_i, options)` with no warm
+    start, loads_i being `forces[i]` at `nodes`: the same arithmetic, so the same answer.
+
+    Parameters
+    ----------
+    problems : sequence of discretisation
+        Each with ``kernel_data``; one type, unknowns' shape and options.
+    design : array_like of int, shape (S,)
+        Index into `problems` of every scene.
+    pressures : array_like, shape (S,)
+        [Pa].
+    nodes : array_like of int, shape (K,)
+        Loaded nodes, shared by all scenes (K = 0: unloaded).
+    forces : array_like, shape (S, K, 2)
+        [N].
+    options : NewtonOptions
+    tip : int
+        Node whose position is returned.
+
+    Returns
+    -------
+    BatchOutcome
+
+    """
+    design, pressures = _index(design, pressures, len(problems))
+    nodes = np.ascontiguousarray(nodes, dtype=np.int64).reshape(-1)
+    forces = np.ascontiguousarray(forces, dtype=float).reshape(pressures.size, nodes.size, 2)
+    datas, flat, opts, cap = _batch_inputs(problems, nodes.size > 0, options)
+    states, status, iterations, figures = _solve_batch_entry(
+        datas, design, pressures, nodes, forces, flat, opts, cap, int(tip))
+    return BatchOutcome(states, status, iterations, *figures[:, :4].T, figures[:, 4:])
+
+
+def rigidity_batch(problems, design, pressures, node, direction, displacement, options):
+    """
+    `rigidity` of S scenes after their cold unloaded solves, compiled over both cores.
+
+    Parameters
+    ----------
+    problems : sequence of discretisation
+        As for `solve_batch`.
+    design : array_like of int, shape (S,)
+    pressures : array_like, shape (S,)
+        [Pa].
+    node : int
+        Loaded node (the tip).
+    direction : array_like (2,)
+        Unit load and displacement direction.
+    displacement : float
+        [m].
+    options : NewtonOptions
+
+    Returns
+    -------
+    BatchRigidity
+
+    """
+    design, pressures = _index(design, pressures, len(problems))
+    free, flat, opts, cap = _batch_inputs(problems, False, options)
+    loaded = _batch_inputs(problems, True, options)[0]
+    out = _rigidity_batch_entry(free, loaded, design, pressures, int(node),
+                                np.ascontiguousarray(direction, dtype=float),
+                                float(displacement), flat, opts, cap)
+    unloaded_x, status, states, iterations, figures = out
+    unloaded = BatchOutcome(unloaded_x, status, iterations[:, 0], *figures[:, :4].T,
+                            np.full((pressures.size, 2), np.nan))
+    return BatchRigidity(unloaded, states, figures[:, 4], iterations[:, 1], figures[:, 5],
+                         figures[:, 6] == 1.0, figures[:, 7], figures[:, 8:10])

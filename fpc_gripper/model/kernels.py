@@ -778,7 +778,7 @@ CCMDense = collections.namedtuple('CCMDense', _CCM_FIELDS)
 
 def ccm_data(seg, prestrain, emc, pressure_coefficient, consistent, loaded):
     """
-    The CCM as the engine's compiled discretisation (`CCMDense` if loaded, else `CCMBlocks`).
+    Return the CCM as the engine's compiled discretisation (`CCMDense` if loaded).
 
     Parameters
     ----------

@@ -10,7 +10,7 @@ from .analysis import CircleFitted
 from .design import ActuatorDesign
 from .engine import linear_solve, linear_step, NewtonOptions, SolverStatus
 from .section_law import station_layout
-from .solver import PRESSURE_MODELS, RigidityResult
+from .solver import AXES, check_rigidity, PRESSURE_MODELS, rigidity_result
 from .validation import real_number
 
 __all__ = ['ArcSolver', 'RodSolver', 'LadderResult', 'RodResult', 'ArcResult']
@@ -200,8 +200,14 @@ class _LadderSolver:
         x0 = None if initial is None else self._pack(initial.state)
         loads = [(self.tip_node, force)] if force.any() else []
         out = engine.solve(self, pressure, loads, self._options, x0)
-        return self._result_type(self, self._unpack(out.x), out.status, out.iterations,
-                                 out.step, pressure, force, fraction=out.fraction)
+        return self._result(out.x, out.status, out.iterations, out.gradient, out.step,
+                            out.min_eig, out.fraction, pressure, loads, force)
+
+    def _result(self, x, status, iterations, gradient, step, min_eig, fraction, pressure, loads,
+                tip_force):
+        """Build the result of an engine solve (a single one or a batch's scene)."""
+        return self._result_type(self, self._unpack(x), status, iterations, step, pressure,
+                                 np.asarray(tip_force, dtype=float), fraction=fraction)
 
     def rigidity(self, pressure=0.0, axis='x', displacement=0.010, initial=None):
         """
@@ -216,35 +222,13 @@ class _LadderSolver:
             K_x = f0 |Z_tip|^3 / (3 delta) or K_z = p0 |X_tip|^3 / (3 delta) [N m^2].
 
         """
-        if axis not in ('x', 'z'):
-            raise ValueError(f"`axis` must be 'x' or 'z', got {axis!r}")
-        delta = real_number('displacement', displacement, '[m]')
-        if delta <= 0.0:
-            raise ValueError(f'`displacement` must be > 0 [m], got {delta}')
+        delta = check_rigidity(axis, displacement)
         unloaded = self.solve(pressure, (0.0, 0.0), initial=initial)
         if not unloaded.success:
-            return RigidityResult(axis, delta, math.nan, math.nan, False,
-                                  'unloaded solve failed: ' + unloaded.message, unloaded,
-                                  None, unloaded.iterations)
-        k = 0 if axis == 'x' else 1
-        direction = np.eye(2)[k]
+            return rigidity_result(self, axis, delta, pressure, unloaded)
         out = engine.rigidity(self, self._pack(unloaded.state), pressure, self.tip_node,
-                              direction, delta, self._options)
-        iterations = unloaded.iterations + out.iterations
-        force = out.force * direction
-        if not out.success:
-            loaded = self._result_type(self, self._unpack(out.x),
-                                       SolverStatus.CONTINUATION_FAILED, iterations, math.inf,
-                                       pressure, force, fraction=out.fraction)
-            return RigidityResult(axis, delta, out.force, math.nan, False,
-                                  f'displacement control stalled at {out.fraction:.1%} of '
-                                  'the displacement', unloaded, loaded, iterations)
-        loaded = self._result_type(self, self._unpack(out.x), SolverStatus.SUCCESS,
-                                   iterations, 0.0, pressure, force)
-        message = 'converged' + ('' if out.stable else
-                                 ' (loaded state is unstable under force control)')
-        return RigidityResult(axis, delta, out.force, abs(loaded.tip[1 - k]), True, message,
-                              unloaded, loaded, iterations)
+                              AXES[axis], delta, self._options)
+        return rigidity_result(self, axis, delta, pressure, unloaded, out)
 
 
 class ArcSolver(_LadderSolver):

@@ -244,7 +244,7 @@ class PCCSolver(_LadderSolver):
         return nodes, forces
 
     def kernel_data(self, loaded):
-        """The compiled discretisation the engine runs (`pcc_kernels.PCCData`)."""
+        """Return the compiled discretisation the engine runs (`pcc_kernels.PCCData`)."""
         return self._data
 
     def energy(self, x, pressure, loads):

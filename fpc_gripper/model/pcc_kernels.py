@@ -595,7 +595,7 @@ PCCData = collections.namedtuple('PCCData', ('lengths', 'stiffness', 'gas', 'pem
 
 @_jit
 def _dense_from_band(lower):
-    """The full (n, n) matrix of a symmetric band in lower form."""
+    """Return the full (n, n) matrix of a symmetric band in lower form."""
     n = lower.shape[1]
     out = np.zeros((n, n))
     for d in range(BANDWIDTH + 1):

@@ -11,7 +11,7 @@ from .selection import AdaptiveSolver
 from .solver import CCMSolver, PRESSURE_MODELS
 
 __all__ = ['DEFAULT_TOLERANCE', 'DEFAULT_N_SEGMENTS', 'MAX_SEGMENTS', 'ModelSettings',
-           'finger_model', 'model_label']
+           'finger_model', 'model_label', 'rung_label']
 
 #: Default tip-position tolerance against the geometrically exact rod [m].
 DEFAULT_TOLERANCE = 5e-5
@@ -101,6 +101,11 @@ def model_label(result):
         return 'none'
     choice = getattr(result, 'model_choice', None)
     if choice is not None:
-        return f'{choice.rung} N={choice.n_segments}' if choice.n_segments else choice.rung
+        return rung_label(choice.rung, choice.n_segments)
     segments = getattr(getattr(result, 'solver', None), 'n_segments', None)
     return f'ccm N={segments}' if segments else type(result).__name__
+
+
+def rung_label(rung, n_segments):
+    """Label of a rung and N, e.g. 'pcc N=22', or the rung alone where N is 0 (arc, rod)."""
+    return f'{rung} N={n_segments}' if n_segments else rung

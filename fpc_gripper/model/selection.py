@@ -466,11 +466,20 @@ class AdaptiveSolver:
         while True:
             solver = self.solver_for(rung, n)
             result = solver.solve(pressure, tip_force, initial=self._warm(solver, initial))
-            refinable = rung.startswith('ccm') and 2 * n <= self.max_segments
-            if (result.success and result.valid) or not refinable:
+            if not self.refines(rung, n, result):
                 break
             n *= 2
-        result.model_choice = ModelChoice(rung, n, choice.predicted_error,
+        return self._labelled(result, choice, n)
+
+    def refines(self, rung, n_segments, result):
+        """Whether `solve` goes on from `result` of (rung, N) to twice the N."""
+        return (rung.startswith('ccm') and 2 * n_segments <= self.max_segments
+                and not (result.success and result.valid))
+
+    @staticmethod
+    def _labelled(result, choice, n):
+        """`result` with its `model_choice`: the chosen rung at the N actually used."""
+        result.model_choice = ModelChoice(choice.rung, n, choice.predicted_error,
                                           choice.reason if n == choice.n_segments else
                                           f'{choice.reason}; refined to N = {n}', choice.cost)
         return result

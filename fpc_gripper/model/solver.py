@@ -14,7 +14,8 @@ from .kinematics import from_scaled, midplane_samples, node_positions, to_scaled
 from .section import build_segments, uniform_edges
 from .validation import real_number
 
-__all__ = ['CCMSolver', 'CCMResult', 'RigidityResult', 'SolverStatus', 'PRESSURE_MODELS']
+__all__ = ['CCMSolver', 'CCMResult', 'RigidityResult', 'SolverStatus', 'PRESSURE_MODELS',
+           'AXES', 'check_rigidity', 'rigidity_result']
 
 #: Pressure-work coefficient k_p of Pi_P = -k_p P V (SPEC "Pressure work"); gamma = 1.4.
 PRESSURE_MODELS = {'adiabatic': 1.0 / (1.4 - 1.0), 'isobaric': 1.0}
@@ -105,7 +106,12 @@ class CCMResult(CircleFitted):
     @functools.cached_property
     def valid(self):
         """Every segment obeys the small-rotation rule |2 d L_i| < 1."""
-        return bool(np.all(self.rotation_measure < 1.0))
+        return bool(self.small_rotations(self.q))
+
+    @staticmethod
+    def small_rotations(q):
+        """Whether states q (..., N, 4) obey |2 d L_i| < 1 in every segment, shape (...)."""
+        return np.all(np.abs(2.0 * q[..., 3]) < 1.0, axis=-1)
 
     @functools.cached_property
     def message(self):
@@ -346,13 +352,13 @@ class CCMSolver:
         return energy, grad, hess[0] if loads else hess
 
     def step(self, grad, hess):
-        """Newton step (N, 4) and the smallest eigenvalue (1.0 when H is positive definite)."""
+        """Return the Newton step (N, 4) and the smallest eigenvalue (1.0 when H is PD)."""
         return linear_step(grad, hess)
 
     solve_linear = staticmethod(linear_solve)
 
     def kernel_data(self, loaded):
-        """The compiled discretisation the engine runs (`kernels.ccm_data`)."""
+        """Return the compiled discretisation the engine runs (`kernels.ccm_data`)."""
         return self._data[bool(loaded)]
 
     def node_jacobian(self, q, node):
@@ -419,8 +425,14 @@ class CCMSolver:
             raise ValueError(f'`tip_force` must be (f0, p0) [N], got {tip_force!r}')
         loads = self._loads(tip_force, point_loads)
         out = engine.solve(self, pressure, loads, self._options, self._initial_state(initial))
-        return CCMResult(self, out.x, out.status, out.iterations, out.gradient, out.step,
-                         pressure, loads, tip_force, out.min_eig, out.fraction)
+        return self._result(out.x, out.status, out.iterations, out.gradient, out.step,
+                            out.min_eig, out.fraction, pressure, loads, tip_force)
+
+    def _result(self, x, status, iterations, gradient, step, min_eig, fraction, pressure, loads,
+                tip_force):
+        """Build the result of an engine solve (a single one or a batch's scene)."""
+        return CCMResult(self, x, status, iterations, gradient, step, pressure, loads,
+                         tip_force, min_eig, fraction)
 
     # -- rigidity -----------------------------------------------------------
     def rigidity(self, pressure=0.0, axis='x', displacement=0.010, initial=None):
@@ -453,33 +465,66 @@ class CCMSolver:
         Zhou, Headings, Dapino (2022), eq. (22); docs/physics.md, section 10.
 
         """
-        if axis not in ('x', 'z'):
-            raise ValueError(f"`axis` must be 'x' or 'z', got {axis!r}")
-        delta = real_number('displacement', displacement, '[m]')
-        if delta <= 0.0:
-            raise ValueError(f'`displacement` must be > 0 [m], got {delta}')
+        delta = check_rigidity(axis, displacement)
         unloaded = self.solve(pressure, (0.0, 0.0), initial=initial)
-        k = 0 if axis == 'x' else 1
-        direction = np.eye(2)[k]
         if not unloaded.success:
-            return RigidityResult(axis, delta, math.nan, math.nan, False,
-                                  'unloaded solve failed: ' + unloaded.message, unloaded,
-                                  None, unloaded.iterations)
-        out = engine.rigidity(self, unloaded.q, pressure, self.n_segments, direction, delta,
+            return rigidity_result(self, axis, delta, pressure, unloaded)
+        out = engine.rigidity(self, unloaded.q, pressure, self.n_segments, AXES[axis], delta,
                               self._options)
-        iterations = unloaded.iterations + out.iterations
-        loads = [(self.n_segments, out.force * direction)]
-        if not out.success:
-            loaded = CCMResult(self, out.x, SolverStatus.CONTINUATION_FAILED, iterations,
-                               math.inf, math.inf, pressure, loads, tuple(out.force * direction),
-                               fraction=out.fraction)
-            return RigidityResult(axis, delta, out.force, math.nan, False,
-                                  f'displacement control stalled at {out.fraction:.1%} '
-                                  'of the displacement', unloaded, loaded, iterations)
-        loaded = CCMResult(self, out.x, SolverStatus.SUCCESS, iterations, out.gradient, 0.0,
-                           pressure, loads, tuple(out.force * direction))
-        lever = abs(loaded.tip[1 - k])
-        message = 'converged' + ('' if out.stable else
-                                 ' (loaded state is unstable under force control)')
-        return RigidityResult(axis, delta, out.force, lever, True, message, unloaded, loaded,
-                              iterations)
+        return rigidity_result(self, axis, delta, pressure, unloaded, out)
+
+
+#: Unit load and displacement direction of each rigidity axis.
+AXES = {'x': np.array([1.0, 0.0]), 'z': np.array([0.0, 1.0])}
+
+
+def check_rigidity(axis, displacement):
+    """Check a rigidity request; return the displacement delta > 0 [m] as a float."""
+    if axis not in AXES:
+        raise ValueError(f"`axis` must be 'x' or 'z', got {axis!r}")
+    delta = real_number('displacement', displacement, '[m]')
+    if delta <= 0.0:
+        raise ValueError(f'`displacement` must be > 0 [m], got {delta}')
+    return delta
+
+
+def rigidity_result(solver, axis, delta, pressure, unloaded, out=None):
+    """
+    Build the RigidityResult of a displacement-controlled solve, eq. (22).
+
+    Parameters
+    ----------
+    solver : CCMSolver or ladder solver
+        Builds the loaded state's result (`_result`).
+    axis : {'x', 'z'}
+    delta : float
+        [m].
+    pressure : float
+        [Pa].
+    unloaded : result
+        The unloaded solve; a failed one gives a failed RigidityResult.
+    out : engine.BorderedOutcome, optional
+        The displacement control from `unloaded` (None when that failed).
+
+    """
+    if not unloaded.success:
+        return RigidityResult(axis, delta, math.nan, math.nan, False,
+                              'unloaded solve failed: ' + unloaded.message, unloaded, None,
+                              unloaded.iterations)
+    k = 0 if axis == 'x' else 1
+    direction = AXES[axis]
+    iterations = unloaded.iterations + out.iterations
+    force = out.force * direction
+    loads = [(solver.n_segments, force)]
+    if not out.success:
+        loaded = solver._result(out.x, SolverStatus.CONTINUATION_FAILED, iterations, math.inf,
+                                math.inf, math.nan, out.fraction, pressure, loads, tuple(force))
+        return RigidityResult(axis, delta, out.force, math.nan, False,
+                              f'displacement control stalled at {out.fraction:.1%} '
+                              'of the displacement', unloaded, loaded, iterations)
+    loaded = solver._result(out.x, SolverStatus.SUCCESS, iterations, out.gradient, 0.0,
+                            math.nan, 1.0, pressure, loads, tuple(force))
+    message = 'converged' + ('' if out.stable else
+                             ' (loaded state is unstable under force control)')
+    return RigidityResult(axis, delta, out.force, abs(loaded.tip[1 - k]), True, message,
+                          unloaded, loaded, iterations)
