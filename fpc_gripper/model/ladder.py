@@ -3,12 +3,13 @@
 import math
 
 import numpy as np
-from scipy.linalg import cho_factor, cho_solve, eigh
+from scipy.linalg import eigh
 
-from . import engine
+from . import engine, rod_kernels
 from .analysis import CircleFitted
 from .design import ActuatorDesign
 from .engine import linear_solve, linear_step, NewtonOptions, SolverStatus
+from .pcc_kernels import section_arrays
 from .section_law import station_layout
 from .solver import AXES, check_rigidity, PRESSURE_MODELS, rigidity_result
 from .validation import real_number
@@ -370,36 +371,66 @@ class _PointwiseLocal:
     """
     The rod's (eps, c1) at given (theta, kappa) points, as a discretisation of the engine.
 
-    Every point decouples, so the Hessian is (M, 2, 2) blocks.
+    Every point decouples, so the Hessian is (K, 2, 2) blocks; energy, derivatives and
+    the step are `rod_kernels.local_energy_kernel`, `local_derivatives_kernel` and
+    `local_step_kernel` (the engine's `linear_step` where a block is not definite).
     """
 
-    def __init__(self, rod, th, kap, force, types, pressure):
-        self.rod, self.th, self.kap, self.force, self.types = rod, th, kap, force, types
-        self.pressure = pressure
+    def __init__(self, rod, kap, along, element, pressure):
         self.gradient_scale = rod.gradient_scale
+        self._arrays = (kap, along, element, rod._stiffness, rod._gas, rod._pemc,
+                        rod.pressure_coefficient * pressure)
 
     def energy(self, b, pressure, loads):
-        b = b.reshape(self.th.shape + (2,))
-        return float(self.rod._local(self.th, self.kap, b, self.pressure, self.force,
-                                     self.types)[0].sum())
+        return rod_kernels.local_energy_kernel(b, *self._arrays)
 
     def derivatives(self, b, pressure, loads):
-        b = b.reshape(self.th.shape + (2,))
-        w, g, h, gf, _, _ = self.rod._local(self.th, self.kap, b, self.pressure, self.force,
-                                            self.types)
-        gb = np.stack([g[..., 0] - gf, g[..., 2]], axis=-1)
-        return float(w.sum()), gb.reshape(-1, 2), h[..., [[0], [2]], [0, 2]].reshape(-1, 2, 2)
+        return rod_kernels.local_derivatives_kernel(b, *self._arrays)
 
-    step = staticmethod(linear_step)
+    @staticmethod
+    def step(grad, hess):
+        step, definite = rod_kernels.local_step_kernel(grad, hess)
+        if definite:
+            return step, 1.0
+        return linear_step(grad, hess)
+
+
+#: `_RodHessian.factor` of a condensed system that is not positive definite.
+_INDEFINITE = False
 
 
 class _RodHessian:
-    """Pointwise Hessian blocks of the rod in a = (theta, kappa) and b = (eps, c1)."""
+    """
+    Pointwise Hessian blocks of the rod in a = (theta, kappa) and b = (eps, c1).
 
-    __slots__ = ('th', 'haa', 'hab', 'hbb')
+    `th` (E, Q) and the blocks `haa`, `hab`, `hbb` (E, Q, 2, 2) are read only. The
+    condensation (`rod_kernels.condense_kernel`): `local` (every hbb positive definite),
+    `inv` = hbb^-1, `hab_inv` = hab hbb^-1, the band `lower` of the condensed theta system
+    and its Cholesky `factor` (`_INDEFINITE` where it is not positive definite); None
+    where not computed. `derivatives` also keeps the Newton step of its own gradient,
+    which the first `step` with that gradient hands out.
+    """
 
-    def __init__(self, th, haa, hab, hbb):
+    __slots__ = ('th', 'haa', 'hab', 'hbb', 'local', 'inv', 'hab_inv', 'lower', 'factor',
+                 '_gradient', '_step')
+
+    def __init__(self, th, haa, hab, hbb, local=None, inv=None, hab_inv=None, lower=None,
+                 factor=None, gradient=None, step=None):
         self.th, self.haa, self.hab, self.hbb = th, haa, hab, hbb
+        self.local, self.inv, self.hab_inv = local, inv, hab_inv
+        self.lower, self.factor = lower, factor
+        self._gradient, self._step = gradient, step
+
+
+def _dense_band(lower):
+    """Return the symmetric (n, n) matrix of a lower band lower[d, k] = H[k + d, k]."""
+    n = lower.shape[1]
+    out = np.zeros((n, n))
+    for d in range(lower.shape[0]):
+        k = np.arange(n - d)
+        out[k + d, k] = lower[d, :n - d]
+        out[k, k + d] = lower[d, :n - d]
+    return out
 
 
 def _gll_nodes(degree):
@@ -462,6 +493,16 @@ class RodSolver(_LadderSolver):
     max_iterations : int
         Newton iterations per (sub)solve.
 
+    Notes
+    -----
+    The energy, gradient, pointwise Hessian blocks, the condensation and its banded
+    Cholesky (half-bandwidth `degree`), the node Jacobian and the outputs' pointwise
+    local equilibrium are compiled kernels (`rod_kernels`); Python only passes them
+    the solver's arrays. Where the condensed system is not positive definite its step
+    mirrors the eigenvalues of the dense matrix, and where a pointwise (eps, c1) block
+    is not, the step is that of the full system with mirrored eigenvalues (both rare,
+    both numpy).
+
     References
     ----------
     docs/physics.md, section 11.4; docs/model_notes.md, "Rod kinematics".
@@ -504,6 +545,12 @@ class RodSolver(_LadderSolver):
         self._dofs = np.arange(self.n_elements)[:, None] * p + np.arange(p + 1)[None, :]
         self.n_theta = self.n_elements * p + 1
         self._qtypes = np.repeat(self.element_types[:, None], xq.size, axis=1)
+        # The section law of every element as kernel arrays, once: no per-call gathering.
+        self._stiffness, self._gas, self._pemc = section_arrays(self.law, self.element_types)
+        self._basis = np.ascontiguousarray(self._basis)
+        self._dbasis = np.ascontiguousarray(self._dbasis)
+        self._weights = np.ascontiguousarray(self._weights)
+        self._sample_geometry()
         # Scale of the tip-rotation Hessian: EI of the stiffest section over L [J].
         self._theta_scale = float(self.law.stiffness[:, 1, 1].max()) / self.length
         self.gradient_scale = self._theta_scale
@@ -511,6 +558,28 @@ class RodSolver(_LadderSolver):
         cap[:self.n_theta - 1] = 0.5
         self._options = NewtonOptions(max_iterations=self.max_iterations, xtol=self.tol,
                                       max_step=cap, energy_scale=self._theta_scale)
+        self._local_options = NewtonOptions(xtol=1e-15, max_step=0.1,
+                                            energy_scale=self._theta_scale)
+
+    def _sample_geometry(self):
+        """Store where the output samples lie; it depends on the edges alone."""
+        # Every sample s_m, and a Gauss rule from its element's start to it, (M, Q + 1).
+        s = np.linspace(0.0, self.length, self.samples)
+        elem = np.clip(np.searchsorted(self.edges, s, side='right') - 1, 0, self.n_elements - 1)
+        lo = self.edges[elem]
+        xq = self._xq
+        sub = lo[:, None] + (s - lo)[:, None] * 0.5 * (xq + 1.0)[None, :]   # (M, Q)
+        allp = np.concatenate([s[:, None], sub], axis=1)                     # (M, Q+1)
+        el = np.repeat(elem[:, None], allp.shape[1], axis=1)
+        xi = 2.0 * (allp - self.edges[el]) / (2.0 * self._half[el]) - 1.0
+        values, derivs = _lagrange(self._nodes_ref, xi.ravel())
+        self._sample_element = elem.astype(np.int64)
+        self._sample_values = np.ascontiguousarray(values)
+        self._sample_derivs = np.ascontiguousarray(derivs)
+        self._sample_half = self._half[el.ravel()]
+        self._sample_point_element = el.ravel().astype(np.int64)
+        self._sample_weights = (0.5 * (s - lo)[:, None]
+                                * np.polynomial.legendre.leggauss(xq.size)[1][None, :])
 
     def _compatible(self, other):
         return (isinstance(other, RodSolver) and other.degree == self.degree
@@ -518,29 +587,6 @@ class RodSolver(_LadderSolver):
 
     def _flat_state(self):
         return (np.zeros(self.n_theta), np.zeros((self.n_elements, self._xq.size, 2)))
-
-    # -- energy -------------------------------------------------------------
-    def _point_fields(self, theta):
-        te = theta[self._dofs]                                          # (E, p+1)
-        th = te @ self._basis.T                                         # (E, Q)
-        kap = np.einsum('eqa,ea->eq', self._dbasis, te)
-        return th, kap
-
-    def _local(self, th, kap, b, pressure, force, types):
-        """Energy density and derivatives in (theta, kappa, eps, c1) at every point."""
-        y = np.stack([b[..., 0], kap, b[..., 1]], axis=-1)
-        w, g, h = self.law.derivatives(y, self.pressure_coefficient * pressure, types)
-        c, s = np.cos(th), np.sin(th)
-        gf = force[0] * c + force[1] * s                                # F . t
-        gfp = -force[0] * s + force[1] * c                              # F . n
-        stretch = 1.0 + b[..., 0]
-        return w - stretch * gf, g, h, gf, gfp, stretch
-
-    def _energy(self, state, pressure, force):
-        theta, b = state
-        th, kap = self._point_fields(theta)
-        w = self._local(th, kap, b, pressure, force, self._qtypes)[0]
-        return float((self._weights * w).sum())
 
     # -- the discretisation's side of the engine --------------------------------------
     # Unknowns: theta at the nodes but the clamped root (theta_0 = 0), then (eps, c1) at
@@ -555,15 +601,10 @@ class RodSolver(_LadderSolver):
 
     def energy(self, x, pressure, loads):
         """Total potential [J] at engine unknowns `x`."""
-        return self._energy(self._unpack(x), pressure, self._force(loads))
-
-    def _assemble(self, values_a):
-        """Sum sum_q (v_q0 N_a + v_q1 N_a') over each element into the theta dofs, (n_theta,)."""
-        rvec = (np.einsum('eq,qa->ea', values_a[..., 0], self._basis)
-                + np.einsum('eq,eqa->ea', values_a[..., 1], self._dbasis))
-        out = np.zeros(self.n_theta)
-        np.add.at(out, self._dofs, rvec)
-        return out
+        return rod_kernels.energy_kernel(
+            np.ascontiguousarray(x, dtype=float), self._basis, self._dbasis, self._weights,
+            self._stiffness, self._gas, self._pemc, self.pressure_coefficient * pressure,
+            self._force(loads))
 
     def derivatives(self, x, pressure, loads):
         """
@@ -571,27 +612,19 @@ class RodSolver(_LadderSolver):
 
         The Hessian is returned as its pointwise blocks in a = (theta, kappa) and
         b = (eps, c1) (a `_RodHessian`): `step` and `solve_linear` condense b point by
-        point, which keeps the system the size of the theta dofs.
+        point, which keeps the system the size of the theta dofs (banded, half-bandwidth
+        `degree`); the condensation, its Cholesky factor and the Newton step come with it.
         """
-        theta, b = self._unpack(x)
-        force = self._force(loads)
-        th, kap = self._point_fields(theta)
-        w, g, h, gf, gfp, stretch = self._local(th, kap, b, pressure, force, self._qtypes)
-        wt = self._weights
-        energy = float((wt * w).sum())
-        ga = np.stack([-stretch * gfp, g[..., 1]], axis=-1)
-        gb = np.stack([g[..., 0] - gf, g[..., 2]], axis=-1)
-        haa = np.zeros(th.shape + (2, 2))
-        haa[..., 0, 0] = stretch * gf
-        haa[..., 1, 1] = h[..., 1, 1]
-        hab = np.zeros(th.shape + (2, 2))
-        hab[..., 0, 0] = -gfp
-        hab[..., 1, 0] = h[..., 1, 0]
-        hab[..., 1, 1] = h[..., 1, 2]
-        hbb = h[..., [[0], [2]], [0, 2]]
-        grad = np.concatenate([self._assemble(wt[..., None] * ga)[1:],
-                               (wt[..., None] * gb).ravel()])
-        return energy, grad, _RodHessian(th, haa, hab, hbb)
+        (energy, grad, th, haa, hab, hbb, local, inv, hab_inv, lower, factor, definite,
+         step) = rod_kernels.derivatives_kernel(
+            np.ascontiguousarray(x, dtype=float), self._basis, self._dbasis, self._weights,
+            self._stiffness, self._gas, self._pemc, self.pressure_coefficient * pressure,
+            self._force(loads), self._theta_scale)
+        if definite:
+            return energy, grad, _RodHessian(th, haa, hab, hbb, local, inv, hab_inv, lower,
+                                             factor, grad, step)
+        return energy, grad, _RodHessian(th, haa, hab, hbb, local, inv, hab_inv, lower,
+                                         _INDEFINITE)
 
     def _condensed(self, hess, rhs, mirror):
         """
@@ -602,54 +635,33 @@ class RodSolver(_LadderSolver):
         system is singular. With `mirror` an indefinite condensed system has its
         eigenvalues mirrored (the step still descends, the local blocks being definite).
         """
-        hab, hbb = hess.hab, hess.hbb
-        det = hbb[..., 0, 0] * hbb[..., 1, 1] - hbb[..., 0, 1] * hbb[..., 1, 0]
-        if not (np.all(np.isfinite(hbb)) and np.all(det > 0.0)
-                and np.all(hbb[..., 0, 0] > 0.0)):
+        if not hess.local:
             raise np.linalg.LinAlgError('pointwise (eps, c1) blocks not positive definite')
-        inv = np.empty_like(hbb)
-        inv[..., 0, 0] = hbb[..., 1, 1] / det
-        inv[..., 1, 1] = hbb[..., 0, 0] / det
-        inv[..., 0, 1] = -hbb[..., 0, 1] / det
-        inv[..., 1, 0] = -hbb[..., 1, 0] / det
-        wt = self._weights
-        hab_inv = np.einsum('...ij,...jk->...ik', hab, inv)
-        schur = hess.haa - np.einsum('...ij,...kj->...ik', hab_inv, hab)
-        nb, db = self._basis, self._dbasis                              # (Q, a), (E, Q, a)
-        kmat = (np.einsum('eq,qa,qb->eab', wt * schur[..., 0, 0], nb, nb)
-                + np.einsum('eq,qa,eqb->eab', wt * schur[..., 0, 1], nb, db)
-                + np.einsum('eq,eqa,qb->eab', wt * schur[..., 1, 0], db, nb)
-                + np.einsum('eq,eqa,eqb->eab', wt * schur[..., 1, 1], db, db))
-        n = self.n_theta
-        big = np.zeros((n, n))
-        dofs = self._dofs
-        np.add.at(big, (dofs[:, :, None], dofs[:, None, :]), kmat)
-        r_theta = np.concatenate([[0.0], rhs[:n - 1]])
-        r_b = rhs[n - 1:].reshape(hbb.shape[:-1])
-        # K dtheta = r_theta - sum_q B^T hab hbb^-1 r_b,q (B maps theta dofs to (theta, kappa)).
-        reduced = r_theta - self._assemble(np.einsum('...ij,...j->...i', hab_inv, r_b))
-        kred = big[1:, 1:] / self._theta_scale
-        dtheta = np.zeros(n)
-        positive = True
-        try:
-            factor = cho_factor(kred, check_finite=False)
-            dtheta[1:] = cho_solve(factor, reduced[1:] / self._theta_scale, check_finite=False)
-        except np.linalg.LinAlgError:
-            positive = False
-            if not mirror:
-                dtheta[1:] = np.linalg.solve(kred, reduced[1:] / self._theta_scale)
-            else:
-                lam, vec = eigh(kred, check_finite=False)
-                lam = np.maximum(np.abs(lam), 1e-10 * np.abs(lam).max())
-                dtheta[1:] = vec @ ((vec.T @ reduced[1:] / self._theta_scale) / lam)
-        dth, dkap = self._point_fields(dtheta)
-        da = np.stack([dth, dkap], axis=-1)
-        dbv = np.einsum('...ij,...j->...i', inv,
-                        r_b / wt[..., None] - np.einsum('...ji,...j->...i', hab, da))
-        return np.concatenate([dtheta[1:], dbv.ravel()]), positive
+        rhs = np.ascontiguousarray(rhs, dtype=float)
+        if hess.factor is not _INDEFINITE:
+            return rod_kernels.condensed_solve_kernel(
+                hess.factor, rhs, hess.inv, hess.hab, hess.hab_inv, self._weights,
+                self._basis, self._dbasis, self._theta_scale), True
+        # Not positive definite (buckling, far from equilibrium): rare, dense numpy.
+        kred = _dense_band(hess.lower)
+        reduced = rod_kernels.reduced_rhs_kernel(rhs, hess.hab_inv, self._basis,
+                                                 self._dbasis, self._theta_scale)
+        if not mirror:
+            dtheta = np.linalg.solve(kred, reduced)
+        else:
+            lam, vec = eigh(kred, check_finite=False)
+            lam = np.maximum(np.abs(lam), 1e-10 * np.abs(lam).max())
+            dtheta = vec @ ((vec.T @ reduced) / lam)
+        return rod_kernels.expand_kernel(dtheta, rhs, hess.inv, hess.hab, self._weights,
+                                         self._basis, self._dbasis), False
 
     def step(self, grad, hess):
         """Newton step, condensed; the full system with mirrored eigenvalues otherwise."""
+        if grad is hess._gradient and hess._step is not None:
+            # The step `derivatives` computed with the factor; handed out once, as each
+            # call's answer is the caller's to keep.
+            step, hess._step = hess._step, None
+            return step, 1.0
         try:
             dx, positive = self._condensed(hess, -grad, mirror=True)
             return dx, 1.0 if positive else -1.0
@@ -695,65 +707,34 @@ class RodSolver(_LadderSolver):
         if node != self.tip_node:
             raise ValueError(f'RodSolver takes loads at the tip (node {self.tip_node}), '
                              f'got node {node}')
-        theta, b = self._unpack(x)
-        th, _ = self._point_fields(theta)
-        wt = self._weights
-        stretch = 1.0 + b[..., 0]
-        c, s = np.cos(th), np.sin(th)
-        tip = np.array([(wt * stretch * c).sum(), (wt * stretch * s).sum()])
-        jac = np.zeros((2, x.size))
-        for k, (dt, de) in enumerate(((-s, c), (c, s))):
-            jac[k, :self.n_theta - 1] = self._assemble(
-                np.stack([wt * stretch * dt, np.zeros_like(th)], axis=-1))[1:]
-            local = np.zeros(th.shape + (2,))
-            local[..., 0] = wt * de
-            jac[k, self.n_theta - 1:] = local.ravel()
-        return tip, jac
+        return rod_kernels.node_jacobian_kernel(np.ascontiguousarray(x, dtype=float),
+                                                self._basis, self._weights)
 
     # -- outputs ------------------------------------------------------------
-    def _solve_local(self, th, kap, b0, force, types, pressure):
-        """Pointwise (eps, c1) minimising W - (1 + eps) F . t at given theta, kappa."""
-        problem = _PointwiseLocal(self, th, kap, force, types, pressure)
-        options = NewtonOptions(xtol=1e-15, max_step=0.1, energy_scale=self._theta_scale)
-        b = np.array(b0, dtype=float).reshape(-1, 2)
-        return engine.newton(problem, b, pressure, [], options).x.reshape(np.shape(b0))
-
     def _outputs(self, state, pressure, force):
-        theta, b = state
-        th, kap = self._point_fields(theta)
-        stretch = 1.0 + b[..., 0]
-        seg = np.stack([(self._weights * stretch * np.cos(th)).sum(axis=1),
-                        (self._weights * stretch * np.sin(th)).sum(axis=1)], axis=1)
-        nodes = np.zeros((self.n_elements + 1, 2))
-        np.cumsum(seg, axis=0, out=nodes[1:])
-        tip = nodes[-1].copy()
-        # Samples: theta and kappa from the polynomial; eps, c1 by the local equilibrium; the
-        # position by a Gauss rule from the element start.
-        s = np.linspace(0.0, self.length, self.samples)
-        elem = np.clip(np.searchsorted(self.edges, s, side='right') - 1, 0, self.n_elements - 1)
-        lo = self.edges[elem]
-        xq = self._xq
-        sub = lo[:, None] + (s - lo)[:, None] * 0.5 * (xq + 1.0)[None, :]   # (M, Q)
-        allp = np.concatenate([s[:, None], sub], axis=1)                     # (M, Q+1)
-        el = np.repeat(elem[:, None], allp.shape[1], axis=1)
-        xi = 2.0 * (allp - self.edges[el]) / (2.0 * self._half[el]) - 1.0
-        values, derivs = _lagrange(self._nodes_ref, xi.ravel())
-        te = theta[self._dofs[el.ravel()]]
-        th_s = (values * te).sum(axis=1).reshape(allp.shape)
-        kap_s = ((derivs * te).sum(axis=1) / self._half[el.ravel()]).reshape(allp.shape)
-        types = self.element_types[el]
-        b0 = np.broadcast_to(b[elem].mean(axis=1)[:, None, :], allp.shape + (2,))
-        bs = self._solve_local(th_s, kap_s, b0, force, types, pressure)
-        st = 1.0 + bs[..., 0]
-        wsub = 0.5 * (s - lo)[:, None] * np.polynomial.legendre.leggauss(xq.size)[1][None, :]
-        dx = (wsub * st[:, 1:] * np.cos(th_s[:, 1:])).sum(axis=1)
-        dz = (wsub * st[:, 1:] * np.sin(th_s[:, 1:])).sum(axis=1)
-        points = nodes[elem] + np.stack([dx, dz], axis=1)
-        points[-1] = tip
+        theta, _ = state
+        x = self._pack(state)
+        force = np.ascontiguousarray(force, dtype=float)
+        # Samples: theta and kappa from the polynomial; eps, c1 by the local equilibrium
+        # (started from the element's mean); the position by a Gauss rule from the
+        # element start.
+        shape = (self.samples, self._xq.size + 1)
+        th_s, kap_s, along, start = rod_kernels.sample_fields_kernel(
+            x, self._xq.size, self._sample_values, self._sample_derivs, self._sample_half,
+            self._sample_point_element, force)
+        problem = _PointwiseLocal(self, kap_s, along, self._sample_point_element, pressure)
+        bs = engine.newton(problem, start, pressure, [], self._local_options).x.reshape(
+            shape + (2,))
+        th_s, kap_s = th_s.reshape(shape), kap_s.reshape(shape)
+        nodes, points = rod_kernels.sample_points_kernel(
+            x, bs, th_s, self._basis, self._weights, self._sample_element,
+            self._sample_weights)
         strains = np.stack([bs[:, 0, 0], kap_s[:, 0], bs[:, 0, 1]], axis=1)
         return {
-            'points': points, 'tangent': th_s[:, 0], 'strains': strains, 'tip': tip,
-            'beta': theta[self._dofs[:, -1]] - theta[self._dofs[:, 0]],
+            'points': points, 'tangent': th_s[:, 0], 'strains': strains,
+            'tip': nodes[-1].copy(), 'beta': theta[self._dofs[:, -1]] - theta[self._dofs[:, 0]],
             'coefficients': None, 'nodes': nodes,
-            'energy': self._energy(state, pressure, force),
+            'energy': rod_kernels.energy_kernel(
+                x, self._basis, self._dbasis, self._weights, self._stiffness, self._gas,
+                self._pemc, self.pressure_coefficient * pressure, force),
         }

@@ -350,7 +350,7 @@ def derivatives_kernel(x, lengths, stiffness, gas, pemc, work, load_nodes, load_
     return strain - load, grad, lower, factor, step, definite
 
 
-# -- banded Cholesky (LAPACK dpbtf2 / dpbtrs, lower, half-bandwidth 3) -----------------------
+# -- banded Cholesky (LAPACK dpbtf2 / dpbtrs, lower; the rows give the half-bandwidth) --------
 @_jit
 def banded_cholesky(lower):
     """
@@ -358,18 +358,20 @@ def banded_cholesky(lower):
 
     Parameters
     ----------
-    lower : ndarray, shape (4, n)
-        lower[d, k] = H[k + d, k].
+    lower : ndarray, shape (b + 1, n)
+        lower[d, k] = H[k + d, k], half-bandwidth b (3 for the PCC, the degree for the
+        rod's condensed system).
 
     Returns
     -------
-    factor : ndarray, shape (4, n)
+    factor : ndarray, shape (b + 1, n)
         L in the same form (H = L L^T); meaningful only when `definite`.
     definite : bool
         False on the first pivot <= 0; as LAPACK, NaN pivots propagate instead.
 
     """
     n = lower.shape[1]
+    band = lower.shape[0] - 1
     factor = lower.copy()
     for j in range(n):
         pivot = factor[0, j]
@@ -377,7 +379,7 @@ def banded_cholesky(lower):
             return factor, False
         pivot = math.sqrt(pivot)
         factor[0, j] = pivot
-        reach = min(BANDWIDTH, n - 1 - j)
+        reach = min(band, n - 1 - j)
         scale = 1.0 / pivot
         for d in range(1, reach + 1):
             factor[d, j] *= scale
@@ -393,15 +395,16 @@ def banded_cholesky(lower):
 def _substitute(factor, x):
     """Solve L L^T y = x in place (forward then back substitution in the band)."""
     n = x.size
+    band = factor.shape[0] - 1
     for j in range(n):
         if x[j] != 0.0:
             x[j] /= factor[0, j]
             temp = x[j]
-            for d in range(1, min(BANDWIDTH, n - 1 - j) + 1):
+            for d in range(1, min(band, n - 1 - j) + 1):
                 x[j + d] -= temp * factor[d, j]
     for j in range(n - 1, -1, -1):
         temp = x[j]
-        for d in range(min(BANDWIDTH, n - 1 - j), 0, -1):
+        for d in range(min(band, n - 1 - j), 0, -1):
             temp -= factor[d, j] * x[j + d]
         x[j] = temp / factor[0, j]
 
