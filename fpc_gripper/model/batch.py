@@ -55,33 +55,42 @@ def _settings(settings):
     return settings
 
 
-def _group_key(solver, loaded):
-    """Scenes solved in one compiled batch share the discretisation type, size and options."""
-    data = solver.kernel_data(loaded)
-    opts, cap = engine._packed(solver, solver._options, engine._flat(solver).shape)
-    return type(data), engine._flat(solver).shape, opts, cap.tobytes(), loaded, \
-        solver.n_segments
-
-
 class _Groups:
-    """Scenes grouped by the batch they are solved in, each with its distinct solvers."""
+    """
+    Scenes grouped by the compiled batch that solves them.
+
+    A group has one discretisation type, size and options, and one loading (loaded or
+    not); it lists its distinct solvers.
+    """
 
     def __init__(self):
         self.groups = {}
+        self._keys = {}
 
-    def add(self, solver, loaded, scene):
-        key = _group_key(solver, loaded)
-        group = self.groups.setdefault(key, {'solvers': [], 'index': {}, 'scenes': []})
-        slot = group['index'].setdefault(id(solver), len(group['solvers']))
+    def _key(self, solver, loaded):
+        memo = (id(solver), loaded)
+        key = self._keys.get(memo)
+        if key is None:
+            flat = engine._flat(solver)
+            opts, cap = engine._packed(solver, solver._options, flat.shape)
+            key = self._keys[memo] = (type(solver.kernel_data(loaded)), flat.shape, opts,
+                                      cap.tobytes(), loaded, solver.n_segments)
+        return key
+
+    def add(self, solver, loaded, scenes):
+        """Add scenes (indices) that `solver` solves, loaded or not."""
+        group = self.groups.setdefault(self._key(solver, loaded),
+                                       {'solvers': [], 'slot': {}, 'scenes': [], 'slots': []})
+        slot = group['slot'].setdefault(id(solver), len(group['solvers']))
         if slot == len(group['solvers']):
             group['solvers'].append(solver)
-        group['scenes'].append((scene, slot))
+        group['scenes'].append(np.asarray(scenes, dtype=np.int64))
+        group['slots'].append(np.full(len(scenes), slot, dtype=np.int64))
 
     def __iter__(self):
         for key, group in self.groups.items():
-            scenes = np.array([scene for scene, _ in group['scenes']], dtype=np.int64)
-            slots = np.array([slot for _, slot in group['scenes']], dtype=np.int64)
-            yield key[4], group['solvers'], scenes, slots
+            yield key[4], group['solvers'], np.concatenate(group['scenes']), \
+                np.concatenate(group['slots'])
 
 
 class GridResult:
@@ -123,13 +132,33 @@ class GridResult:
         self.iterations = np.zeros(count, dtype=np.int64)
         self.tip = np.full((count, 2), np.nan)
         self.models = np.empty(count, dtype=object)
-        self._scenes = [None] * count
+        # Where each scene's full result comes from: a batch row or a single solve.
+        self._batch = np.full(count, -1, dtype=np.int64)
+        self._row = np.zeros(count, dtype=np.int64)
+        self._batches = []
+        self._singles = {}
+        self._models = [None] * len(designs)
+        self._choices = {}
+
+    def _spec(self, scene):
+        """(model, choice, pressure [Pa], tip force [N]) of a flat scene index."""
+        d, p, f = np.unravel_index(scene, self.shape)
+        force = self.tip_forces[f]
+        return (self._models[d], self._choices.get(scene), float(self.pressures[p]),
+                (float(force[0]), float(force[1])))
 
     def _finish(self):
         for name in ('success', 'status', 'iterations', 'models'):
             setattr(self, name, getattr(self, name).reshape(self.shape))
         self.tip = self.tip.reshape(self.shape + (2,))
         return self
+
+    def _single(self, scene, result):
+        self.success[scene], self.status[scene] = result.success, int(result.status)
+        self.iterations[scene], self.tip[scene] = result.iterations, result.tip
+        self.models[scene] = model_label(result)
+        self._singles[scene] = result
+        self._batch[scene] = -1
 
     def result(self, design, pressure, force=0):
         """
@@ -141,21 +170,32 @@ class GridResult:
             Indices into `designs`, `pressures` and `tip_forces`.
 
         """
-        flat = int(np.ravel_multi_index((design, pressure, force), self.shape))
-        scene = self._scenes[flat]
-        return scene() if callable(scene) else scene
+        scene = int(np.ravel_multi_index((design, pressure, force), self.shape))
+        if scene in self._singles:
+            return self._singles[scene]
+        batch, solvers, slots, loaded = self._batches[self._batch[scene]]
+        k = int(self._row[scene])
+        model, choice, pressure_pa, tip_force = self._spec(scene)
+        solver = solvers[slots[k]]
+        loads = [(solver.n_segments, np.array(tip_force))] if loaded else []
+        result = solver._result(batch.states[k], SolverStatus(int(batch.status[k])),
+                                int(batch.iterations[k]), float(batch.gradient[k]),
+                                float(batch.step[k]), float(batch.min_eig[k]),
+                                float(batch.fraction[k]), pressure_pa, loads, tip_force)
+        return result if choice is None else model._labelled(result, choice,
+                                                             choice.n_segments)
 
     def __repr__(self):
         return (f'GridResult(shape={self.shape}, success={int(self.success.sum())}/'
                 f'{self.success.size})')
 
 
-def _scene_solver(model, pressure, force):
-    """The solver a scene's single solve uses first, and its AdaptiveSolver choice."""
+def _choices(model, pressures, forces):
+    """Return the solver each scene's single solve uses first, and its model choice."""
     if isinstance(model, AdaptiveSolver):
-        choice = model.choose(pressure, force)
-        return model.solver_for(choice.rung, choice.n_segments), choice
-    return model, None
+        choices = model.choose_many(pressures, forces)
+        return [model.solver_for(c.rung, c.n_segments) for c in choices], choices
+    return [model] * len(pressures), [None] * len(pressures)
 
 
 def solve_grid(designs, pressures, tip_forces=((0.0, 0.0),), settings=ModelSettings()):
@@ -166,8 +206,8 @@ def solve_grid(designs, pressures, tip_forces=((0.0, 0.0),), settings=ModelSetti
     the cheapest rung that meets 0.05 mm; ``ModelSettings(tolerance=0)``: the paper
     CCM8). Scenes are grouped by discretisation and solved in compiled batches
     (`engine.solve_batch`); a scene whose adaptive model refines (a CCM rung whose
-    first solve fails or breaks the small-rotation rule) is finished by the single
-    solve, which does exactly that.
+    first solve fails or breaks the small-rotation rule), or whose model does not run
+    compiled, is finished by the single solve, which does exactly that.
 
     Parameters
     ----------
@@ -194,71 +234,74 @@ def solve_grid(designs, pressures, tip_forces=((0.0, 0.0),), settings=ModelSetti
     forces = _tip_forces(tip_forces)
     settings = _settings(settings)
     out = GridResult(designs, pressures, forces, settings)
+    n_p, n_f = pressures.size, forces.shape[0]
+    per_design = n_p * n_f
+    scene_p = [float(p) for p in np.repeat(pressures, n_f)]
+    scene_f = [(float(f[0]), float(f[1])) for f in np.tile(forces, (n_p, 1))]
+    scene_loaded = np.tile(np.any(forces != 0.0, axis=1), n_p)
     groups = _Groups()
-    choices = {}
-    scenes = []
-    loaded_force = [bool(f[0] or f[1]) for f in forces]
     for d, design in enumerate(designs):
-        model = finger_model(design, settings)
-        for p, pressure in enumerate(pressures):
-            for f, force in enumerate(forces):
-                spec = (float(pressure), (float(force[0]), float(force[1])))
-                solver, choice = _scene_solver(model, *spec)
-                scene = len(scenes)
-                scenes.append((model, solver) + spec)
-                choices[scene] = choice
-                if hasattr(solver, 'kernel_data'):
-                    groups.add(solver, loaded_force[f], scene)
-                else:
-                    # A rung that does not run compiled (the arc, the rod): its own solve.
-                    _store_result(out, scene, model.solve(*spec))
+        model = out._models[d] = finger_model(design, settings)
+        base = d * per_design
+        if not isinstance(model, AdaptiveSolver):
+            # One solver for the whole design: its loaded and unloaded scenes as two blocks.
+            for loaded in (False, True):
+                block = base + np.flatnonzero(scene_loaded == loaded)
+                if block.size:
+                    groups.add(model, loaded, block)
+            continue
+        blocks = {}
+        for k, choice in enumerate(model.choose_many(scene_p, scene_f)):
+            scene = base + k
+            out._choices[scene] = choice
+            solver = model.solver_for(choice.rung, choice.n_segments)
+            if hasattr(solver, 'kernel_data'):
+                blocks.setdefault((id(solver), bool(scene_loaded[k])), (solver, []))[1] \
+                    .append(scene)
+            else:
+                # A rung that does not run compiled (the rod): its own solve.
+                out._single(scene, model.solve(scene_p[k], scene_f[k]))
+        for (_, loaded), (solver, scenes) in blocks.items():
+            groups.add(solver, loaded, scenes)
     for loaded, solvers, index, slots in groups:
-        pressure = np.array([scenes[i][2] for i in index])
-        force = np.array([scenes[i][3] for i in index]).reshape(index.size, 1, 2)
+        local = index % per_design
+        pressure = np.repeat(pressures, n_f)[local]
+        force = np.tile(forces, (n_p, 1))[local].reshape(index.size, 1, 2)
         tip = solvers[0].n_segments
         nodes = np.array([tip] if loaded else [], dtype=np.int64)
         batch = engine.solve_batch(solvers, slots, pressure, nodes,
                                    force if loaded else force[:, :0], solvers[0]._options, tip)
+        out._batches.append((batch, solvers, slots, loaded))
+        out._batch[index] = len(out._batches) - 1
+        out._row[index] = np.arange(index.size)
+        out.status[index] = batch.status
+        out.success[index] = batch.status == int(SolverStatus.SUCCESS)
+        out.iterations[index] = batch.iterations
+        out.tip[index] = batch.tips
+        adaptive = [k for k, scene in enumerate(index) if scene in out._choices]
+        if len(adaptive) < index.size:
+            out.models[index] = model_label(_Segments(solvers[0].n_segments))
+        if not adaptive:
+            continue
         valid = (CCMResult.small_rotations(batch.states) if isinstance(solvers[0], CCMSolver)
                  else np.ones(index.size, dtype=bool))
-        for k, scene in enumerate(index):
-            _store(out, scene, scenes[scene], choices[scene], batch, k, valid[k], loaded)
+        for k in adaptive:
+            scene = index[k]
+            model, choice = out._models[scene // per_design], out._choices[scene]
+            if model.refines(choice.rung, choice.n_segments,
+                             _Verdict(out.success[scene], valid[k])):
+                out._single(scene, model.solve(*out._spec(scene)[2:]))
+            else:
+                out.models[scene] = rung_label(choice.rung, choice.n_segments)
     return out._finish()
 
 
-def _store(out, scene, spec, choice, batch, k, valid, loaded):
-    """Fill one scene of `out` from a batch, or from its single solve where that refines."""
-    model, solver, pressure, force = spec
-    status = SolverStatus(int(batch.status[k]))
-    success = status is SolverStatus.SUCCESS
-    if choice is not None and model.refines(choice.rung, choice.n_segments,
-                                            _Verdict(success, valid)):
-        _store_result(out, scene, model.solve(pressure, force))
-        return
-    out.success[scene] = success
-    out.status[scene] = int(status)
-    out.iterations[scene] = batch.iterations[k]
-    out.tip[scene] = batch.tips[k]
-    loads = [(solver.n_segments, np.array(force))] if loaded else []
-    args = (batch.states[k], status, int(batch.iterations[k]), float(batch.gradient[k]),
-            float(batch.step[k]), float(batch.min_eig[k]), float(batch.fraction[k]), pressure,
-            loads, force)
+class _Segments:
+    """What `pipeline.model_label` reads of a fixed CCM's result: its solver's N."""
 
-    def build():
-        result = solver._result(*args)
-        return result if choice is None else model._labelled(result, choice,
-                                                             choice.n_segments)
-    out._scenes[scene] = build
-    out.models[scene] = (rung_label(choice.rung, choice.n_segments) if choice is not None
-                         else f'ccm N={solver.n_segments}')
-
-
-def _store_result(out, scene, result):
-    """Fill one scene of `out` from a result of a single solve."""
-    out.success[scene], out.status[scene] = result.success, int(result.status)
-    out.iterations[scene], out.tip[scene] = result.iterations, result.tip
-    out.models[scene] = model_label(result)
-    out._scenes[scene] = result
+    def __init__(self, n_segments):
+        self.solver = self
+        self.n_segments = n_segments
 
 
 class _Verdict:
@@ -354,17 +397,21 @@ def rigidity_grid(designs, pressures, axis='x', displacement=0.010, settings=Mod
     out = RigidityGrid(designs, pressures, axis, delta)
     groups = _Groups()
     scenes = []
+    scene_p = [float(p) for p in pressures]
     for design in designs:
         model = finger_model(design, settings)
-        for pressure in pressures:
-            solver, choice = _scene_solver(model, float(pressure), (0.0, 0.0))
+        solvers, choices = _choices(model, scene_p, [(0.0, 0.0)] * len(scene_p))
+        blocks = {}
+        for solver, choice, pressure in zip(solvers, choices, scene_p):
             scene = len(scenes)
-            scenes.append((solver, float(pressure), choice))
+            scenes.append((solver, pressure, choice))
             if hasattr(solver, 'kernel_data'):
-                groups.add(solver, False, scene)
+                blocks.setdefault(id(solver), (solver, []))[1].append(scene)
             else:
-                _store_rigidity(out, scene, solver.rigidity(float(pressure), axis, delta),
-                                choice, solver)
+                _store_rigidity(out, scene, solver.rigidity(pressure, axis, delta), choice,
+                                solver)
+        for solver, block in blocks.values():
+            groups.add(solver, False, block)
     k = 0 if axis == 'x' else 1
     for _, solvers, index, slots in groups:
         pressure = np.array([scenes[i][1] for i in index])
@@ -400,7 +447,7 @@ def _store_rigidity(out, scene, result, choice, solver):
 
 
 def _rigidity_builder(solver, axis, delta, pressure, batch, j):
-    """A function that builds scene j's RigidityResult as the single solve does."""
+    """Return a function that builds scene j's RigidityResult as the single solve does."""
     def build():
         free = batch.unloaded
         status = SolverStatus(int(free.status[j]))

@@ -211,6 +211,59 @@ def _node_jacobian_compiled(problem, x, node):
     return None
 
 
+# Reductions of the loops: numpy when interpreted, allocation-free loops when compiled.
+def _max_abs(a):
+    """Return max |a|, 0 for an empty array."""
+    return float(np.abs(a).max()) if a.size else 0.0
+
+
+def _max_ratio(a, cap):
+    """Return max |a| / cap, cap elementwise of a's shape; 0 for an empty array."""
+    return float((np.abs(a) / cap).max()) if a.size else 0.0
+
+
+def _dot(a, b):
+    """Return the sum of a * b over all elements."""
+    return float(np.vdot(a, b))
+
+
+@overload(_max_abs, jit_options={'nogil': True})
+def _max_abs_compiled(a):
+    def impl(a):
+        out = 0.0
+        for value in a.flat:
+            out = max(out, abs(value))
+        # max() drops NaN: the loops test finiteness of this figure.
+        return out if np.all(np.isfinite(a)) else np.nan
+    return impl
+
+
+@overload(_max_ratio, jit_options={'nogil': True})
+def _max_ratio_compiled(a, cap):
+    def impl(a, cap):
+        out = 0.0
+        flat_cap = cap.ravel()
+        k = 0
+        for value in a.flat:
+            out = max(out, abs(value) / flat_cap[k])
+            k += 1
+        return out
+    return impl
+
+
+@overload(_dot, jit_options={'nogil': True})
+def _dot_compiled(a, b):
+    def impl(a, b):
+        out = 0.0
+        flat_b = b.ravel()
+        k = 0
+        for value in a.flat:
+            out += value * flat_b[k]
+            k += 1
+        return out
+    return impl
+
+
 # -- the loops: each written once, run compiled or interpreted -----------------------------
 @register_jitable
 def _newton(problem, x, pressure, nodes, forces, options, cap):
@@ -220,29 +273,29 @@ def _newton(problem, x, pressure, nodes, forces, options, cap):
     grad_rel = np.inf
     energy, grad, hess = _derivatives(problem, x, pressure, nodes, forces)
     for iteration in range(1, max_iterations + 1):
-        grad_rel = np.abs(grad).max() / scale if grad.size else 0.0
+        grad_rel = _max_abs(grad) / scale
         if not (np.isfinite(energy) and np.isfinite(grad_rel)):
             return x, _NOT_FINITE, iteration, grad_rel, step_norm, np.nan
         step, min_eig = _step(problem, grad, hess)
-        step_norm = np.abs(step).max() if step.size else 0.0
+        step_norm = _max_abs(step)
         if not np.isfinite(step_norm):
             return x, _NOT_FINITE, iteration, grad_rel, step_norm, np.nan
         if grad_rel <= gtol and step_norm <= xtol:
             status = _SUCCESS if min_eig > 0.0 else _UNSTABLE
             return x + step, status, iteration, grad_rel, step_norm, min_eig
-        ratio = (np.abs(step) / cap).max()
+        ratio = _max_ratio(step, cap)
         if ratio > 1.0:
             step = step / ratio
-        slope = np.sum(grad * step)
+        slope = _dot(grad, step)
         if not slope < 0.0:
             step = -grad / scale
-            slope = -np.sum(grad * grad) / scale
+            slope = -_dot(grad, grad) / scale
         trial = x + step
         e_trial, g_trial, h_trial = _derivatives(problem, trial, pressure, nodes, forces)
         flat = -slope <= flat_slope * (abs(energy) + energy_scale)
         if e_trial <= energy + armijo * slope or flat:
             x, energy, grad, hess = trial, e_trial, g_trial, h_trial
-            step_norm = np.abs(step).max()
+            step_norm = _max_abs(step)
             continue
         alpha = 0.5
         while True:
@@ -253,7 +306,7 @@ def _newton(problem, x, pressure, nodes, forces, options, cap):
             if alpha < 1e-10:
                 return x, _LINE_SEARCH_FAILED, iteration, grad_rel, step_norm, min_eig
         x = trial
-        step_norm = alpha * np.abs(step).max()
+        step_norm = alpha * _max_abs(step)
         energy, grad, hess = _derivatives(problem, x, pressure, nodes, forces)
     return x, _MAX_ITERATIONS, max_iterations, grad_rel, step_norm, np.nan
 
@@ -406,16 +459,19 @@ def _rigidity_entry(problem, x, pressure, node, direction, displacement, options
 
 
 @_jit_parallel
-def _solve_batch_entry(problems, design, pressures, nodes, forces, flat, options, cap, tip):
+def _solve_batch_entry(problems, design, pressures, nodes, forces, initial, flat, options, cap,
+                       tip):
     count = pressures.size
+    warm = initial.shape[0] > 0
     states = np.empty((count,) + flat.shape)
     status = np.empty(count, dtype=np.int64)
     iterations = np.empty(count, dtype=np.int64)
     figures = np.empty((count, 6))
     for i in numba.prange(count):
         problem = problems[design[i]]
+        start = initial[i] if warm else flat
         x, code, its, grad, step, eig, fraction = _solve(
-            problem, flat, False, flat, pressures[i], nodes, forces[i], options, cap)
+            problem, start, warm, flat, pressures[i], nodes, forces[i], options, cap)
         states[i] = x
         status[i] = code
         iterations[i] = its
@@ -736,12 +792,12 @@ def _index(design, pressures, count):
     return design, pressures
 
 
-def solve_batch(problems, design, pressures, nodes, forces, options, tip):
+def solve_batch(problems, design, pressures, nodes, forces, options, tip, initial=None):
     """
-    Cold solves of S independent scenes in one compiled loop over both cores (`prange`).
+    Solves of S independent scenes in one compiled loop over both cores (`prange`).
 
-    Scene i is `solve(problems[design[i]], pressures[i], loads_i, options)` with no warm
-    start, loads_i being `forces[i]` at `nodes`: the same arithmetic, so the same answer.
+    Scene i is `solve(problems[design[i]], pressures[i], loads_i, options, initial[i])`,
+    loads_i being `forces[i]` at `nodes`: the same arithmetic, so the same answer.
 
     Parameters
     ----------
@@ -758,6 +814,8 @@ def solve_batch(problems, design, pressures, nodes, forces, options, tip):
     options : NewtonOptions
     tip : int
         Node whose position is returned.
+    initial : array_like, shape (S,) + unknowns, optional
+        Warm starts [scaled units]; None: every scene from the flat state.
 
     Returns
     -------
@@ -768,8 +826,15 @@ def solve_batch(problems, design, pressures, nodes, forces, options, tip):
     nodes = np.ascontiguousarray(nodes, dtype=np.int64).reshape(-1)
     forces = np.ascontiguousarray(forces, dtype=float).reshape(pressures.size, nodes.size, 2)
     datas, flat, opts, cap = _batch_inputs(problems, nodes.size > 0, options)
+    if initial is None:
+        initial = np.zeros((0,) + flat.shape)
+    else:
+        initial = np.ascontiguousarray(initial, dtype=float)
+        if initial.shape != (pressures.size,) + flat.shape:
+            raise ValueError(f'`initial` must have shape {(pressures.size,) + flat.shape}, '
+                             f'got {initial.shape}')
     states, status, iterations, figures = _solve_batch_entry(
-        datas, design, pressures, nodes, forces, flat, opts, cap, int(tip))
+        datas, design, pressures, nodes, forces, initial, flat, opts, cap, int(tip))
     return BatchOutcome(states, status, iterations, *figures[:, :4].T, figures[:, 4:])
 
 

@@ -40,6 +40,15 @@ def _law_matrix(emc):
 
 # -- segments -----------------------------------------------------------------------------
 @_jit
+def _horner5(law, column, s):
+    """Column `column` of the PEMC law at strain s: sum_k law[k, column] s^k, k = 0..5."""
+    acc = law[5, column]
+    for k in range(4, -1, -1):
+        acc = acc * s + law[k, column]
+    return acc
+
+
+@_jit
 def _strain_unknowns(q, i, y):
     """Fill y = (A, B', D', C) of segment i (energy._strain_state)."""
     y[0] = q[i, 0]
@@ -99,12 +108,7 @@ def segment_energy_kernel(q, stiffness, gas_volume, gas_moments, pemc_basis, pem
         pemc = 0.0
         for p in range(points):
             s = _pemc_strain(pemc_basis, i, p, y, prestrain)
-            density = 0.0
-            power = 1.0
-            for k in range(6):
-                density += power * law[k, 0]
-                power *= s
-            pemc += pemc_weights[i, p] * density
+            pemc += pemc_weights[i, p] * _horner5(law, 0, s)
         # Pi_P = -c (1 + C)(V0 + g . y3): the gas volume is bilinear in (y3, C).
         lin_gas = gas_volume[i] + (gas_moments[i, 0] * y[0] + gas_moments[i, 1] * y[1]
                                    + gas_moments[i, 2] * y[2])
@@ -137,7 +141,6 @@ def segment_derivatives_kernel(q, stiffness, gas_volume, gas_moments, pemc_basis
     g_y = np.empty(4)
     h_y = np.empty((4, 4))
     pemc = np.empty(10)
-    fields = np.empty(3)
     # d(A, B', D', C)/dq: constant but for dB'/dq3 = 4 q3.
     jac = np.zeros((4, 4))
     jac[0, 0] = 1.0
@@ -150,14 +153,15 @@ def segment_derivatives_kernel(q, stiffness, gas_volume, gas_moments, pemc_basis
         pemc[:] = 0.0
         for p in range(points):
             s = _pemc_strain(pemc_basis, i, p, y, prestrain)
-            fields[:] = 0.0
-            power = 1.0
-            for k in range(6):
-                for c in range(3):
-                    fields[c] += power * law[k, c]
-                power *= s
-            for c in range(10):
-                pemc[c] += fields[_PRODUCT_LAW[c]] * pemc_products[i, p, c]
+            density = _horner5(law, 0, s)
+            stress = _horner5(law, 1, s)
+            tangent = _horner5(law, 2, s)
+            # The (1, phi_a, phi_a phi_b) products take F, sigma and sigma' (_PRODUCT_LAW).
+            pemc[0] += density * pemc_products[i, p, 0]
+            for c in range(1, 4):
+                pemc[c] += stress * pemc_products[i, p, c]
+            for c in range(4, 10):
+                pemc[c] += tangent * pemc_products[i, p, c]
         quadratic = 0.0
         for a in range(4):
             ky = 0.0

@@ -5,10 +5,11 @@ import math
 import numpy as np
 from scipy.linalg import eigh
 
-from . import engine, rod_kernels
+from . import arc_kernels, engine, rod_kernels
 from .analysis import CircleFitted
 from .design import ActuatorDesign
 from .engine import linear_solve, linear_step, NewtonOptions, SolverStatus
+from .kernels import load_arrays
 from .pcc_kernels import section_arrays
 from .section_law import station_layout
 from .solver import AXES, check_rigidity, PRESSURE_MODELS, rigidity_result
@@ -275,42 +276,15 @@ class ArcSolver(_LadderSolver):
         self.gradient_scale = float(self.law.stiffness[:, 0, 0].max()) * self.length
         self._options = NewtonOptions(max_iterations=self.max_iterations, xtol=self.tol,
                                       max_step=0.5, flat_slope=1e-14, energy_scale=1e-6)
+        self._data = arc_kernels.ArcData(*section_arrays(self.law, np.zeros(1, dtype=int)),
+                                         float(self.pressure_coefficient), float(self.length),
+                                         self._scale, _ARC_T, _ARC_W)
 
     def _compatible(self, other):
         return isinstance(other, ArcSolver)
 
     def _flat_state(self):
         return np.zeros(3)
-
-    def _arc_integrals(self, phi, orders=3):
-        """Return I[k] = int_0^1 t^k (cos, sin)(phi t) dt, shape (orders, 2, ...)."""
-        phi = np.asarray(phi, dtype=float)
-        arg = np.multiply.outer(phi, _ARC_T)
-        c, s = np.cos(arg), np.sin(arg)
-        out = []
-        for k in range(orders):
-            w = _ARC_W * _ARC_T ** k
-            out.append(np.stack([c @ w, s @ w]))
-        return np.array(out)
-
-    def _derivatives(self, y, pressure, force):
-        length = self.length
-        energy, grad, hess = self.law.derivatives(y, self.pressure_coefficient * pressure, 0)
-        energy, grad, hess = length * energy, length * grad, length * hess
-        i0, i1, i2 = self._arc_integrals(y[1] * length)
-        # S = int cos, C = int sin; S' = -int t sin, C' = int t cos; S'' = -int t^2 cos, ...
-        base = np.array([i0[0], i0[1]])
-        d1 = np.array([-i1[1], i1[0]])
-        d2 = np.array([-i2[0], -i2[1]])
-        stretch = 1.0 + y[0]
-        tip = stretch * length * base
-        energy -= force @ tip
-        grad[0] -= force @ (length * base)
-        grad[1] -= force @ (stretch * length ** 2 * d1)
-        hess[0, 1] -= force @ (length ** 2 * d1)
-        hess[1, 0] -= force @ (length ** 2 * d1)
-        hess[1, 1] -= force @ (stretch * length ** 3 * d2)
-        return energy, grad, hess
 
     # -- the discretisation's side of the engine: unknowns (eps, kappa L, c1) ----------
     def _pack(self, y):
@@ -319,20 +293,23 @@ class ArcSolver(_LadderSolver):
     def _unpack(self, x):
         return x / self._scale
 
+    def kernel_data(self, loaded):
+        """Return the compiled discretisation the engine runs (`arc_kernels.ArcData`)."""
+        return self._data
+
     def derivatives(self, x, pressure, loads):
         """Energy [J], gradient and Hessian in the scaled unknowns (eps, kappa L, c1)."""
-        sc = self._scale
-        energy, grad, hess = self._derivatives(x / sc, pressure, self._force(loads))
-        return energy, grad / sc, hess / sc[:, None] / sc[None, :]
+        return arc_kernels.arc_derivatives(self._data, np.ascontiguousarray(x, dtype=float),
+                                           float(pressure), *self._load_arrays(loads))
 
     def energy(self, x, pressure, loads):
         """Total potential [J] at scaled unknowns `x`."""
         return self.derivatives(x, pressure, loads)[0]
 
-    @staticmethod
-    def step(grad, hess):
+    def step(self, grad, hess):
         """Newton step of the 3 x 3 system (eigenvalues mirrored where indefinite)."""
-        return linear_step(grad, hess, floor=1e-10)
+        return arc_kernels.arc_step(self._data, np.ascontiguousarray(grad, dtype=float),
+                                    np.ascontiguousarray(hess, dtype=float))
 
     solve_linear = staticmethod(linear_solve)
 
@@ -340,30 +317,36 @@ class ArcSolver(_LadderSolver):
         """Tip position [m] and its derivatives in the scaled unknowns, (2, 3)."""
         if node != self.tip_node:
             raise ValueError(f'ArcSolver has nodes 0 and 1 (the tip), got {node}')
-        length, sc = self.length, self._scale
-        y = x / sc
-        i0, i1 = self._arc_integrals(y[1] * length, orders=2)
-        stretch = 1.0 + y[0]
-        jac = np.zeros((2, 3))
-        jac[:, 0] = length * i0
-        jac[:, 1] = stretch * length ** 2 * np.array([-i1[1], i1[0]])
-        return stretch * length * i0, jac / sc[None, :]
+        return arc_kernels.arc_node_jacobian(self._data, np.ascontiguousarray(x, dtype=float),
+                                             int(node))
+
+    def _load_arrays(self, loads):
+        force = self._force(loads)
+        return (np.array([self.tip_node], dtype=np.int64), force.reshape(1, 2)) \
+            if force.any() else load_arrays([])
+
+    def turning(self, y):
+        """Return the turning kappa L [rad] of the arc of state y = (eps, kappa, c1)."""
+        return y[1] * self.length
 
     def _outputs(self, y, pressure, force):
         length = self.length
         s = np.linspace(0.0, length, self.samples)
-        i0 = self._arc_integrals(y[1] * s, orders=1)[0]
+        # The position at s is s (1 + eps) I_0(kappa s): the arc integral with phi = kappa s.
+        arg = np.multiply.outer(y[1] * s, _ARC_T)
+        i0 = np.stack([np.cos(arg) @ _ARC_W, np.sin(arg) @ _ARC_W])
         stretch = 1.0 + y[0]
         points = (stretch * s * i0).T
         tip = points[-1].copy()
         d = 0.5 * y[1]
+        loads = [(self.tip_node, np.asarray(force, dtype=float))]
         return {
             'points': points, 'tangent': y[1] * s,
             'strains': np.tile(y, (self.samples, 1)), 'tip': tip,
-            'beta': np.array([y[1] * length]),
+            'beta': np.array([self.turning(y)]),
             'coefficients': np.array([[y[0], -2.0 * d * d / 3.0, y[2], d]]),
             'nodes': np.array([[0.0, 0.0], tip]),
-            'energy': float(self._derivatives(y, pressure, force)[0]),
+            'energy': float(self.energy(self._pack(y), pressure, loads)),
         }
 
 

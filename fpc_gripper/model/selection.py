@@ -9,12 +9,13 @@ import pathlib
 import numpy as np
 from scipy.interpolate import PchipInterpolator
 
+from . import engine
 from .design import ActuatorDesign
 from .ladder import ArcSolver, RodSolver
 from .pcc import PCCSolver
 from .section import uniform_edges
 from .section_law import station_layout
-from .solver import CCMSolver, PRESSURE_MODELS
+from .solver import CCMSolver, PRESSURE_MODELS, SolverStatus
 from .validation import real_number
 
 __all__ = ['Scene', 'ModelChoice', 'RUNGS', 'choose_model', 'load_error_model', 'make_solver',
@@ -215,18 +216,74 @@ class _ArcFeature:
             self.table = PchipInterpolator(self.grid, [float(s.beta[0]) for s in self.states])
         self._loaded = {}
 
+    def _tabled(self, pressure, tip_force):
+        return self.table is not None and tip_force == (0.0, 0.0) and pressure <= self.grid[-1]
+
+    def _nearest(self, pressure):
+        """Warm start of a loaded arc solve: the table state nearest in pressure, or None."""
+        state = self.states[int(np.argmin(np.abs(self.grid - pressure)))]
+        return None if state is None else self.arc._pack(state.state)
+
+    def _turning(self, x, status):
+        if status is not SolverStatus.SUCCESS:
+            return math.inf
+        return abs(float(self.arc.turning(self.arc._unpack(x))))
+
     def turning(self, pressure, tip_force):
         """Return |kappa L| of the arc rung [rad]; inf when the arc has no equilibrium."""
-        if self.table is not None and tip_force == (0.0, 0.0) and pressure <= self.grid[-1]:
+        if self._tabled(pressure, tip_force):
             return abs(float(self.table(pressure)))
         key = (pressure,) + tuple(tip_force)
         if key not in self._loaded:
-            nearest = self.states[int(np.argmin(np.abs(self.grid - pressure)))]
-            arc = self.arc.solve(pressure, tip_force, initial=nearest)
+            loads = [(self.arc.tip_node, np.asarray(tip_force, dtype=float))] \
+                if any(tip_force) else []
+            out = engine.solve(self.arc, pressure, loads, self.arc._options,
+                               self._nearest(pressure))
             if len(self._loaded) >= _FEATURE_CACHE:
                 self._loaded.clear()
-            self._loaded[key] = abs(float(arc.beta[0])) if arc.success else math.inf
+            self._loaded[key] = self._turning(out.x, out.status)
         return self._loaded[key]
+
+    def turnings(self, pressures, tip_forces):
+        """
+        Return `turning` of many scenes: their loaded arcs solved as one compiled batch.
+
+        Parameters
+        ----------
+        pressures : sequence of float
+            [Pa].
+        tip_forces : sequence of (float, float)
+            [N].
+
+        Returns
+        -------
+        list of float
+            Equal to `turning` of each scene: the same solves (warm from the same table
+            states) in a batch.
+
+        """
+        out = [None] * len(pressures)
+        todo = {True: [], False: []}
+        for k, (pressure, force) in enumerate(zip(pressures, tip_forces)):
+            if self._tabled(pressure, force):
+                out[k] = abs(float(self.table(pressure)))
+            elif (pressure,) + tuple(force) in self._loaded:
+                out[k] = self._loaded[(pressure,) + tuple(force)]
+            else:
+                todo[bool(any(force)) and self._nearest(pressure) is not None].append(k)
+        for k in todo[False]:
+            out[k] = self.turning(pressures[k], tip_forces[k])
+        if todo[True]:
+            index = todo[True]
+            batch = engine.solve_batch(
+                [self.arc], np.zeros(len(index), dtype=np.int64),
+                [pressures[k] for k in index], [self.arc.tip_node],
+                np.array([tip_forces[k] for k in index], dtype=float).reshape(-1, 1, 2),
+                self.arc._options, self.arc.tip_node,
+                initial=np.array([self._nearest(pressures[k]) for k in index]))
+            for j, k in enumerate(index):
+                out[k] = self._turning(batch.states[j], SolverStatus(int(batch.status[j])))
+        return out
 
 
 @functools.lru_cache(maxsize=16)
@@ -437,7 +494,21 @@ class AdaptiveSolver:
         Choices are cached per error-model cell, which the choice is a function of.
         """
         scene = Scene(self.design, pressure, tuple(tip_force), self.pressure_model)
-        cell = _scene_bin(self._model, scene, scene_turning(scene, self._model))
+        return self._choice(scene, scene_turning(scene, self._model))
+
+    def choose_many(self, pressures, tip_forces):
+        """Return `choose` of many scenes; their loaded arc features are solved as a batch."""
+        scenes = [Scene(self.design, p, tuple(f), self.pressure_model)
+                  for p, f in zip(pressures, tip_forces)]
+        if not scenes:
+            return []
+        feature = _arc_feature(self.design, self.pressure_model,
+                               float(self._model['ranges']['pressure'][1]))
+        turnings = feature.turnings([s.pressure for s in scenes], [s.tip_force for s in scenes])
+        return [self._choice(scene, turning) for scene, turning in zip(scenes, turnings)]
+
+    def _choice(self, scene, turning):
+        cell = _scene_bin(self._model, scene, turning)
         choice = self._choices.get(cell)
         if choice is None:
             choice = self._choices[cell] = _choose(self._model, cell, self.tolerance)
@@ -478,7 +549,7 @@ class AdaptiveSolver:
 
     @staticmethod
     def _labelled(result, choice, n):
-        """`result` with its `model_choice`: the chosen rung at the N actually used."""
+        """Return `result` with its `model_choice`: the chosen rung at the N used."""
         result.model_choice = ModelChoice(choice.rung, n, choice.predicted_error,
                                           choice.reason if n == choice.n_segments else
                                           f'{choice.reason}; refined to N = {n}', choice.cost)

@@ -352,7 +352,7 @@ class CCMSolver:
         return energy, grad, hess[0] if loads else hess
 
     def step(self, grad, hess):
-        """Return the Newton step (N, 4) and the smallest eigenvalue (1.0 when H is PD)."""
+        """Compute the Newton step, shape (N, 4), and the smallest eigenvalue (1.0 if PD)."""
         return linear_step(grad, hess)
 
     solve_linear = staticmethod(linear_solve)

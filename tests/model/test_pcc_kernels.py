@@ -71,7 +71,13 @@ def test_kernels_run_compiled():
     x = solver._pack(result.state)
     _, grad, hess = solver.derivatives(x, 1e5, [(24, np.array([0.0, 0.5]))])
     solver.energy(x, 1e5, [])
+    data = solver.kernel_data(True)
+    pcc_kernels.energy_kernel(x, data.lengths, data.stiffness, data.gas, data.pemc, 1e5,
+                              *solver._load_arrays([]))
+    pcc_kernels.derivatives_kernel(x, data.lengths, data.stiffness, data.gas, data.pemc, 1e5,
+                                   *solver._load_arrays([]))
     solver.solve_linear(hess, grad)
+    solver.step(grad, hess)
     pcc_kernels.banded_cholesky(hess.lower)
     pcc_kernels.newton_step_kernel(hess.lower, grad)
     solver.node_jacobian(x, 24)
@@ -79,7 +85,8 @@ def test_kernels_run_compiled():
     half_angle_sinc(np.array([0.5]))
     for name in ('half_angle_sinc_kernel', 'energy_kernel', 'derivatives_kernel',
                  'banded_cholesky', 'cholesky_solve', 'newton_step_kernel', 'nodes_kernel',
-                 'node_jacobian_kernel', 'outputs_kernel'):
+                 'node_jacobian_kernel', 'outputs_kernel', 'pcc_derivatives', 'pcc_energy',
+                 'pcc_solve_linear'):
         kernel = getattr(pcc_kernels, name)
         assert kernel.signatures and kernel.targetoptions['nopython'], name
 
