@@ -6,13 +6,14 @@ import pathlib
 import sys
 import time
 
+import numba
 import numpy as np
 from scipy.optimize import minimize
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 from timing import machine, median_time  # noqa: E402
 
-from fpc_gripper.model import ActuatorDesign, CCMSolver, RodSolver  # noqa: E402
+from fpc_gripper.model import ActuatorDesign, batch, CCMSolver, RodSolver  # noqa: E402
 from fpc_gripper.model.kinematics import node_positions, to_scaled  # noqa: E402
 from fpc_gripper.model.pipeline import finger_model, ModelSettings  # noqa: E402
 
@@ -23,6 +24,10 @@ TARGETS = {'cold_s': 60e-6, 'warm_s': 20e-6, 'kx_s': 150e-6, 'speedup': 5000.0}
 DEFAULT_TARGETS = {'loaded_warm_s': 100e-6, 'loaded_cold_s': 400e-6, 'rod_s': 1e-3}
 #: The loaded scene of the default-model rows: default finger, 100 kPa, p0 = 0.3 N.
 LOADED = (100e3, (0.0, 0.3))
+#: Batched throughput targets [solves/s] on 2 cores.
+BATCH_TARGETS = {'ccm8_unloaded': 100e3, 'default_loaded': 20e3, 'kx_ccm8': 10e3}
+#: Designs of the batches: the paper finger at ten prestrains.
+BATCH_PRESTRAINS = np.linspace(0.15, 0.40, 10)
 
 
 def naive_solve(solver, pressure, scaled):
@@ -108,14 +113,77 @@ def run_default(repeats):
     }
 
 
+def _batches():
+    """Return the batched workloads: name -> (callable, scenes)."""
+    designs = [ActuatorDesign.paper(prestrain=float(e)) for e in BATCH_PRESTRAINS]
+    paper = ModelSettings(tolerance=0.0)
+    unloaded = np.linspace(0.0, 300e3, 2000)
+    loaded = np.linspace(0.0, 300e3, 500)
+    kx = np.linspace(0.0, 80e3, 500)
+    d = len(designs)
+    return {
+        'ccm8_unloaded': (lambda: batch.solve_grid(designs, unloaded, settings=paper),
+                          d * unloaded.size),
+        'default_loaded': (lambda: batch.solve_grid(designs, loaded, [LOADED[1]]),
+                           d * loaded.size),
+        'kx_ccm8': (lambda: batch.rigidity_grid(designs, kx, settings=paper), d * kx.size),
+        'kx_default': (lambda: batch.rigidity_grid(designs, kx), d * kx.size),
+    }
+
+
+def _batch_equals_single(grid, settings, samples=60):
+    """Return the largest relative tip deviation of batched scenes from single solves."""
+    rng = np.random.default_rng(0)
+    worst = 0.0
+    for flat in rng.choice(grid.success.size, size=min(samples, grid.success.size),
+                           replace=False):
+        d, p, f = np.unravel_index(flat, grid.shape)
+        single = finger_model(grid.designs[d], settings).solve(
+            float(grid.pressures[p]), tuple(grid.tip_forces[f]))
+        worst = max(worst, float(np.abs(grid.tip[d, p, f] - single.tip).max()
+                                 / np.abs(single.tip).max()))
+    return worst
+
+
+def run_batch(repeats):
+    """Measure the median throughput of the batched entry point on both cores and on one."""
+    out = {'threads': numba.get_num_threads(), 'rows': {}}
+    workloads = _batches()
+    for name, (fn, scenes) in workloads.items():
+        grid = fn()
+        row = {'scenes': scenes, 'success': float(np.mean(grid.success))}
+        row['wall_s'] = median_time(fn, repeats, warmup=1)
+        row['per_s'] = scenes / row['wall_s']
+        threads = numba.get_num_threads()
+        numba.set_num_threads(1)
+        try:
+            row['one_thread_per_s'] = scenes / median_time(fn, max(1, repeats // 2), warmup=0)
+        finally:
+            numba.set_num_threads(threads)
+        out['rows'][name] = row
+    paper = ModelSettings(tolerance=0.0)
+    designs = [ActuatorDesign.paper(prestrain=float(e)) for e in BATCH_PRESTRAINS]
+    out['equal_single_rel'] = {
+        'ccm8_unloaded': _batch_equals_single(
+            batch.solve_grid(designs, np.linspace(0.0, 300e3, 40), settings=paper), paper),
+        'default_loaded': _batch_equals_single(
+            batch.solve_grid(designs, np.linspace(0.0, 300e3, 40),
+                             [(0.0, 0.0), LOADED[1], (0.3, 0.0)]),
+            ModelSettings()),
+    }
+    return out
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument('--repeats', type=int, default=200)
     parser.add_argument('--segments', type=int, nargs='*', default=[1, 2, 4, 8, 16])
+    parser.add_argument('--batch-repeats', type=int, default=5)
     parser.add_argument('--output', type=pathlib.Path, default=RESULTS)
     args = parser.parse_args(argv)
     rows = run(args.segments, args.repeats)
     default = run_default(args.repeats)
+    batches = run_batch(args.batch_repeats)
     print(f'{"N":>3} {"cold ms":>8} {"it":>3} {"warm ms":>8} {"it":>3} {"Kx ms":>7} | '
           f'{"naive SI ms":>11} {"x":>6} {"tip err":>8} | {"naive scaled ms":>15} {"x":>5} '
           f'{"tip err":>8}')
@@ -155,12 +223,26 @@ def main(argv=None):
     if ccm8:
         print(f'| CCM8 cold against naive BFGS (SI unknowns), same run | {ccm8["speedup"]:.0f}× '
               f'| ≥ {TARGETS["speedup"]:.0f}× | {"yes" if verdict["speedup"] else "no"} |')
+    batch_verdict = {}
+    for key, label in (('ccm8_unloaded', 'batched throughput, unloaded CCM8'),
+                       ('default_loaded', 'batched throughput, default model, loaded'),
+                       ('kx_ccm8', 'batched throughput, K_x (CCM8)'),
+                       ('kx_default', 'batched throughput, K_x (default model)')):
+        row = batches['rows'][key]
+        target = BATCH_TARGETS.get(key)
+        batch_verdict[key] = None if target is None else row['per_s'] >= target
+        print(f'| {label} | {row["per_s"] / 1e3:.1f}k/s ({row["one_thread_per_s"] / 1e3:.1f}k/s '
+              f'on 1 thread) | {"≥ %.0fk/s" % (target / 1e3) if target else "—"} | '
+              f'{"—" if target is None else ("yes" if batch_verdict[key] else "no")} |')
+    print('batched = single, largest relative tip deviation:', batches['equal_single_rel'])
     args.output.parent.mkdir(parents=True, exist_ok=True)
     args.output.write_text(json.dumps({'machine': machine(), 'targets': TARGETS,
                                        'ccm8_meets': verdict, 'rows': rows,
                                        'default_targets': DEFAULT_TARGETS,
                                        'default': default,
-                                       'default_meets': default_verdict}, indent=2))
+                                       'default_meets': default_verdict,
+                                       'batch_targets': BATCH_TARGETS, 'batch': batches,
+                                       'batch_meets': batch_verdict}, indent=2))
     print(f'wrote {args.output}')
 
 
