@@ -4,6 +4,7 @@ from dataclasses import dataclass
 import enum
 import math
 import pathlib
+import typing
 
 import numba
 from numba import types
@@ -80,8 +81,7 @@ class NewtonOptions:
                 float(gradient_scale)), cap
 
 
-@dataclass(frozen=True)
-class NewtonOutcome:
+class NewtonOutcome(typing.NamedTuple):
     """State and figures of one Newton run (internal: solvers build their results from it)."""
 
     x: np.ndarray
@@ -91,6 +91,10 @@ class NewtonOutcome:
     step: float
     min_eig: float = math.nan
     fraction: float = 1.0
+
+
+#: SolverStatus by code, without the enum's own lookup on every solve.
+_STATUS = tuple(SolverStatus)
 
 
 @dataclass(frozen=True)
@@ -559,9 +563,8 @@ def _own(x, problem):
 
 def _outcome(out, problem, fraction=1.0):
     x, status, iterations, grad, step, eig = out[:6]
-    return NewtonOutcome(_own(x, problem), SolverStatus(int(status)), int(iterations),
-                         float(grad),
-                         float(step), float(eig), float(out[6]) if len(out) > 6 else fraction)
+    return NewtonOutcome(_own(x, problem), _STATUS[status], iterations, grad, step, eig,
+                         out[6] if len(out) > 6 else fraction)
 
 
 def newton(problem, x, pressure, loads, options):

@@ -84,19 +84,23 @@ class CCMResult(CircleFitted):
                  tip_force, min_eig=float('nan'), fraction=1.0):
         self.solver = solver
         self.q = q
-        self.status = SolverStatus(status)
+        self.status = status if type(status) is SolverStatus else SolverStatus(status)
         self.success = self.status is SolverStatus.SUCCESS
         self.iterations = int(iterations)
         self.gradient_norm = float(gradient)
         self.last_step = float(step)
         self.pressure = float(pressure)
-        self.tip_force = tuple(float(f) for f in tip_force)
+        self.tip_force = (float(tip_force[0]), float(tip_force[1]))
         self.point_loads = tuple(loads)
         # Derived fields are built on first use: a controller polling tips pays for
         # neither the message nor the coefficients it does not read.
-        self._message_args = dict(grad=gradient, gtol=solver.gtol, step=step,
-                                  xtol=solver.xtol, iterations=iterations, min_eig=min_eig,
-                                  fraction=fraction)
+        self._figures = (gradient, step, iterations, min_eig, fraction)
+
+    @property
+    def _message_args(self):
+        grad, step, iterations, min_eig, fraction = self._figures
+        return dict(grad=grad, gtol=self.solver.gtol, step=step, xtol=self.solver.xtol,
+                    iterations=iterations, min_eig=min_eig, fraction=fraction)
 
     @functools.cached_property
     def rotation_measure(self):
