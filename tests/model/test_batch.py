@@ -154,6 +154,19 @@ def _chosen_label(model, pressure):
     return rung_label(choice.rung, choice.n_segments)
 
 
+def test_rigidity_result_is_labelled_with_its_model(designs):
+    # BUG (found writing these tests): AdaptiveSolver.rigidity returns results without
+    # `model_choice`, and `model_label` then names every unlabelled result 'ccm N=<n>',
+    # whatever its solver: the default model's PCC rung comes out as 'ccm N=22', while
+    # the grid (rightly) says 'pcc N=22'.
+    settings = ModelSettings()
+    out = rigidity_grid(designs[1], [0.0], 'x', 0.010, settings)
+    single = finger_model(designs[1], settings).rigidity(0.0, 'x', 0.010)
+    assert out.models[0, 0] == 'pcc N=22'
+    assert model_label(single.unloaded) == out.models[0, 0]
+    assert model_label(out.result(0, 0).unloaded) == out.models[0, 0]
+
+
 def test_spec_rigidity_through_the_batch():
     # SPEC "Reference values" (as in test_reference.py): K_x of the paper finger at
     # prestrain 0.25, CCM8, delta = 10 mm along +X, to 0.1 %.
