@@ -1,0 +1,343 @@
+"""Batched solves (model.batch, engine.solve_batch) equal the single solves, scene by scene."""
+
+import itertools
+
+from helpers import deviation
+import numpy as np
+import pytest
+
+from fpc_gripper.model import ActuatorDesign, CCMSolver, engine
+from fpc_gripper.model.batch import rigidity_grid, solve_grid
+from fpc_gripper.model.engine import SolverStatus
+from fpc_gripper.model.pcc import PCCSolver
+from fpc_gripper.model.pipeline import finger_model, model_label, ModelSettings, rung_label
+
+#: A scene of a batch runs the single solve's arithmetic on the same model; only the
+#: order of work differs. Seen bitwise equal; 1e-12 leaves room for BLAS round-off.
+RTOL = 1e-12
+PRESSURES = (0.0, 100e3, 200e3, 300e3)
+FORCES = ((0.0, 0.0), (0.3, 0.0), (0.0, -0.2), (-0.1, 0.1))
+#: Per setting, an extra tip force [N] and why: 2 N lies beyond the error model's load
+#: range (the default model then takes the rod, which is not batched), and 1e4 N stalls
+#: the paper CCM's continuation.
+SETTINGS = {
+    'default': (ModelSettings(), (0.0, -2.0)),
+    'paper': (ModelSettings(tolerance=0.0), (1e4, 0.0)),
+    # A coarse tolerance takes the arc and CCM rungs of few segments; two of them break
+    # the small-rotation rule at N = 2 and are refined by the single solve.
+    'coarse': (ModelSettings(tolerance=2e-2), (0.0, -2.0)),
+}
+
+
+@pytest.fixture(scope='module')
+def designs():
+    """Three paper prestrains and one narrower channel (a non-paper geometry)."""
+    out = [ActuatorDesign.paper(prestrain) for prestrain in (0.15, 0.25, 0.40)]
+    return out + [ActuatorDesign.paper(0.25).replace(Cy=0.024)]
+
+
+@pytest.fixture(scope='module', params=sorted(SETTINGS))
+def grid(request, designs):
+    """(settings, forces, grid, single cold solves keyed by (d, p, f))."""
+    settings, extra = SETTINGS[request.param]
+    forces = FORCES + (extra,)
+    out = solve_grid(designs, PRESSURES, forces, settings)
+    singles = {}
+    for (d, design), (p, pressure), (f, force) in itertools.product(
+            enumerate(designs), enumerate(PRESSURES), enumerate(forces)):
+        singles[d, p, f] = finger_model(design, settings).solve(pressure, force)
+    return request.param, forces, out, singles
+
+
+def _state(result):
+    """The unknowns of a result as one flat array (the rod's state is a pair of arrays)."""
+    state = result.q if hasattr(result, 'q') else result.state
+    if isinstance(state, tuple):
+        return np.concatenate([np.ravel(part) for part in state])
+    return state
+
+
+def _assert_same_result(got, want):
+    """A result built from a batch against the single solve's, field by field."""
+    assert got.status is want.status and got.success == want.success
+    assert got.iterations == want.iterations
+    assert got.valid == want.valid
+    assert model_label(got) == model_label(want)
+    assert deviation(_state(got), _state(want)) <= RTOL
+    assert deviation(got.tip, want.tip) <= RTOL
+    assert deviation(got.points, want.points) <= RTOL
+    assert abs(got.energy - want.energy) <= RTOL * abs(want.energy)
+    assert got.pressure == want.pressure and got.tip_force == want.tip_force
+
+
+def test_grid_equals_single_solves(grid, designs):
+    name, forces, out, singles = grid
+    shape = (len(designs), len(PRESSURES), len(forces))
+    assert out.success.shape == out.status.shape == out.iterations.shape == shape
+    assert out.models.shape == shape and out.tip.shape == shape + (2,)
+    for key, single in singles.items():
+        assert out.status[key] == int(single.status), key
+        assert out.success[key] == single.success, key
+        assert out.iterations[key] == single.iterations, key
+        assert out.models[key] == model_label(single), key
+        assert deviation(out.tip[key], single.tip) <= RTOL, key
+        _assert_same_result(out.result(*key), single)
+
+
+def test_grid_holds_the_cases_it_is_meant_to(grid, designs):
+    # The grids are picked to hold several models, refined and failed scenes: check
+    # that they do, on the single solves, so that the comparison above covers them.
+    name, forces, out, singles = grid
+    labels = {model_label(result) for result in singles.values()}
+    if name == 'default':
+        assert {'rod', 'pcc N=22'} <= labels
+    if name == 'paper':
+        failed = [key for key, result in singles.items() if not result.success]
+        assert failed and all(key[2] == len(forces) - 1 for key in failed)
+        assert {singles[key].status for key in failed} == {SolverStatus.CONTINUATION_FAILED}
+        assert not out.success[..., -1].any()
+    if name == 'coarse':
+        refined = [key for key, result in singles.items()
+                   if result.model_choice.n_segments != finger_model(
+                       designs[key[0]], SETTINGS[name][0]).choose(
+                           PRESSURES[key[1]], forces[key[2]]).n_segments]
+        assert refined
+        assert {model_label(singles[key]) for key in refined} == {'ccm N=4'}
+        assert any(label.startswith('arc') for label in labels)
+        assert len({label.split()[0] for label in labels}) >= 4, labels
+
+
+def test_grid_of_one_design_and_one_force():
+    design = ActuatorDesign.paper(0.30)
+    out = solve_grid(design, [150e3], (0.2, -0.1), ModelSettings(tolerance=0.0))
+    assert out.shape == (1, 1, 1)
+    single = CCMSolver(design, 8).solve(150e3, (0.2, -0.1))
+    _assert_same_result(out.result(0, 0, 0), single)
+    assert 'GridResult(shape=(1, 1, 1), success=1/1)' == repr(out)
+
+
+# -- flexural rigidity ------------------------------------------------------------------
+RIGIDITY_PRESSURES = (0.0, 55.2e3, 200e3)
+
+
+@pytest.mark.parametrize('axis', ['x', 'z'])
+@pytest.mark.parametrize('name', ['default', 'paper'])
+def test_rigidity_grid_equals_single_rigidity(designs, name, axis):
+    settings = SETTINGS[name][0]
+    out = rigidity_grid(designs, RIGIDITY_PRESSURES, axis, 0.010, settings)
+    assert out.value.shape == (len(designs), len(RIGIDITY_PRESSURES))
+    for (d, design), (p, pressure) in itertools.product(enumerate(designs),
+                                                        enumerate(RIGIDITY_PRESSURES)):
+        single = finger_model(design, settings).rigidity(pressure, axis, 0.010)
+        assert single.success, single.message
+        assert out.success[d, p] and out.iterations[d, p] == single.iterations
+        for field in ('value', 'force', 'lever'):
+            got, want = getattr(out, field)[d, p], getattr(single, field)
+            assert abs(got - want) <= RTOL * abs(want), (field, d, p)
+        got = out.result(d, p)
+        assert got.success and got.message == single.message and got.axis == axis
+        assert got.iterations == single.iterations
+        for field in ('value', 'force', 'lever', 'displacement'):
+            assert abs(getattr(got, field) - getattr(single, field)) \
+                <= RTOL * abs(getattr(single, field)), field
+        for part in ('unloaded', 'loaded'):
+            _assert_same_result(getattr(got, part), getattr(single, part))
+        # The model of the unloaded scene (single rigidity results carry no label).
+        assert out.models[d, p] == _chosen_label(finger_model(design, settings), pressure)
+
+
+def _chosen_label(model, pressure):
+    """Label of the model a single unloaded solve takes: the choice, or the fixed CCM."""
+    if isinstance(model, CCMSolver):
+        return f'ccm N={model.n_segments}'
+    choice = model.choose(pressure, (0.0, 0.0))
+    return rung_label(choice.rung, choice.n_segments)
+
+
+def test_rigidity_result_is_labelled_with_its_model(designs):
+    # BUG (found writing these tests): AdaptiveSolver.rigidity returns results without
+    # `model_choice`, and `model_label` then names every unlabelled result 'ccm N=<n>',
+    # whatever its solver: the default model's PCC rung comes out as 'ccm N=22', while
+    # the grid (rightly) says 'pcc N=22'.
+    settings = ModelSettings()
+    out = rigidity_grid(designs[1], [0.0], 'x', 0.010, settings)
+    single = finger_model(designs[1], settings).rigidity(0.0, 'x', 0.010)
+    assert out.models[0, 0] == 'pcc N=22'
+    assert model_label(single.unloaded) == out.models[0, 0]
+    assert model_label(out.result(0, 0).unloaded) == out.models[0, 0]
+
+
+def test_spec_rigidity_through_the_batch():
+    # SPEC "Reference values" (as in test_reference.py): K_x of the paper finger at
+    # prestrain 0.25, CCM8, delta = 10 mm along +X, to 0.1 %.
+    out = rigidity_grid(ActuatorDesign.paper(0.25), [0.0, 55.2e3], 'x', 0.010,
+                        ModelSettings(tolerance=0.0))
+    assert out.success.all()
+    assert out.value[0, 0] == pytest.approx(1.636e-3, rel=1e-3)
+    assert out.force[0, 0] == pytest.approx(0.2591, rel=1e-3)
+    assert out.lever[0, 0] == pytest.approx(57.43e-3, rel=1e-3)
+    assert out.value[0, 1] == pytest.approx(1.396e-3, rel=1e-3)
+    # Eq. (22) from the batch's own force and lever.
+    assert out.value[0, 0] == pytest.approx(
+        out.force[0, 0] * out.lever[0, 0] ** 3 / (3 * 0.010), rel=1e-12)
+
+
+# -- bad input ----------------------------------------------------------------------------
+@pytest.mark.parametrize('call, exc, match', [
+    (lambda d: solve_grid(d, [-1.0]), ValueError, '`pressures`'),
+    (lambda d: solve_grid(d, [0.0, float('nan')]), ValueError, '`pressures`'),
+    (lambda d: solve_grid(d, [float('inf')]), ValueError, '`pressures`'),
+    (lambda d: solve_grid(d, []), ValueError, '`pressures`'),
+    (lambda d: solve_grid(d, [0.0], [(0.1, float('nan'))]), ValueError, '`tip_forces`'),
+    (lambda d: solve_grid(d, [0.0], [(float('inf'), 0.0)]), ValueError, '`tip_forces`'),
+    (lambda d: solve_grid(d, [0.0], [(0.1, 0.2, 0.3)]), ValueError, '`tip_forces`'),
+    (lambda d: solve_grid([], [0.0]), ValueError, '`designs`'),
+    (lambda d: solve_grid([d, 'paper'], [0.0]), TypeError, r'`designs\[1\]`'),
+    (lambda d: solve_grid(d, [0.0], settings=0.0), TypeError, '`settings`'),
+    (lambda d: rigidity_grid(d, [-5.0]), ValueError, '`pressures`'),
+    (lambda d: rigidity_grid(d, [float('nan')]), ValueError, '`pressures`'),
+    (lambda d: rigidity_grid([], [0.0]), ValueError, '`designs`'),
+    (lambda d: rigidity_grid([{'Lx': 0.1}], [0.0]), TypeError, r'`designs\[0\]`'),
+    (lambda d: rigidity_grid(d, [0.0], axis='y'), ValueError, '`axis`'),
+    (lambda d: rigidity_grid(d, [0.0], displacement=0.0), ValueError, '`displacement`'),
+    (lambda d: rigidity_grid(d, [0.0], displacement=-0.01), ValueError, '`displacement`'),
+    (lambda d: rigidity_grid(d, [0.0], displacement=float('nan')), ValueError,
+     '`displacement`'),
+    (lambda d: rigidity_grid(d, [0.0], settings='paper'), TypeError, '`settings`'),
+])
+def test_grid_bad_input_names_the_argument(call, exc, match):
+    with pytest.raises(exc, match=match):
+        call(ActuatorDesign.paper(0.25))
+
+
+# -- the engine's batches ---------------------------------------------------------------------
+def _problems():
+    """CCM8 of two designs, paper and consistent: one type, size and options."""
+    return [CCMSolver(ActuatorDesign.paper(0.15), 8, max_iterations=8),
+            CCMSolver(ActuatorDesign.paper(0.40), 8, max_iterations=8,
+                      reconstruction='consistent'),
+            CCMSolver(ActuatorDesign.paper(0.25), 8, max_iterations=8)]
+
+
+def _check_batch_scenes(problems, design, pressures, forces, tip):
+    """engine.solve_batch against engine.solve, scene by scene; return the statuses."""
+    nodes = [tip] if forces is not None else []
+    batch_forces = (np.asarray(forces, dtype=float).reshape(len(design), 1, 2)
+                    if forces is not None else np.zeros((len(design), 0, 2)))
+    out = engine.solve_batch(problems, design, pressures, nodes, batch_forces,
+                             problems[0]._options, tip)
+    statuses = []
+    for i, (d, pressure) in enumerate(zip(design, pressures)):
+        problem = problems[d]
+        loads = [(tip, np.array(forces[i], dtype=float))] if forces is not None else []
+        single = engine.solve(problem, pressure, loads, problem._options)
+        assert out.status[i] == int(single.status), i
+        assert out.iterations[i] == single.iterations, i
+        assert out.fraction[i] == single.fraction, i          # a dyadic fraction
+        assert deviation(out.states[i], single.x) <= RTOL, i
+        tip_position = problem.node_jacobian(single.x, tip)[0]
+        assert deviation(out.tips[i], tip_position) <= RTOL, i
+        for field in ('gradient', 'step', 'min_eig'):
+            got, want = getattr(out, field)[i], getattr(single, field)
+            assert (np.isnan(got) and np.isnan(want)) or abs(got - want) <= RTOL * max(
+                abs(want), 1e-300), (field, i)
+        statuses.append(single.status)
+    return statuses
+
+
+def test_solve_batch_equals_single_solves_through_continuation_and_failure():
+    # max_iterations = 8: 30 N of compression needs continuation, 1000 N stalls it.
+    problems = _problems()
+    design = [0, 1, 2, 0, 2, 1, 0, 0]
+    pressures = [0.0, 200e3, 100e3, 300e3, 0.0, 0.0, 0.0, 0.0]
+    forces = [(0.3, -0.2), (0.0, 0.0), (-0.1, 0.1), (0.0, -0.2), (-30.0, 0.0),
+              (1000.0, 0.0), (-30.0, 0.0), (0.0, 0.0)]
+    statuses = _check_batch_scenes(problems, design, pressures, forces, 8)
+    assert SolverStatus.CONTINUATION_FAILED in statuses
+    assert statuses.count(SolverStatus.SUCCESS) == len(statuses) - 1
+    # The continuation scenes: Newton from flat alone fails there.
+    cold = engine.newton(problems[0], problems[0].flat(), 0.0,
+                         [(8, np.array([-30.0, 0.0]))], problems[0]._options)
+    assert cold.status is SolverStatus.MAX_ITERATIONS
+    # Unloaded scenes take the block-Hessian discretisation.
+    _check_batch_scenes(problems, [2, 1, 0], [0.0, 150e3, 300e3], None, 8)
+
+
+def test_pcc_solve_batch_equals_single_solves():
+    problems = [PCCSolver(ActuatorDesign.paper(prestrain), 22) for prestrain in (0.25, 0.40)]
+    # (0, 30) N on the 0.40 finger needs continuation; 1000 N stalls it.
+    design = [0, 1, 1, 0, 1]
+    pressures = [100e3, 0.0, 0.0, 300e3, 200e3]
+    forces = [(0.3, -0.2), (0.0, 30.0), (1000.0, 0.0), (-0.1, 0.1), (0.0, 0.0)]
+    statuses = _check_batch_scenes(problems, design, pressures, forces, 22)
+    assert statuses[2] is SolverStatus.CONTINUATION_FAILED
+    assert statuses.count(SolverStatus.SUCCESS) == 4
+
+
+@pytest.mark.parametrize('axis', ['x', 'z'])
+def test_rigidity_batch_equals_single_rigidity(axis):
+    problems = _problems()
+    direction = {'x': np.array([1.0, 0.0]), 'z': np.array([0.0, 1.0])}[axis]
+    design = [2, 0, 1, 2]
+    pressures = [0.0, 100e3, 200e3, 55.2e3]
+    out = engine.rigidity_batch(problems, design, pressures, 8, direction, 0.010,
+                                problems[0]._options)
+    for i, (d, pressure) in enumerate(zip(design, pressures)):
+        problem = problems[d]
+        free = engine.solve(problem, pressure, [], problem._options)
+        single = engine.rigidity(problem, free.x, pressure, 8, direction, 0.010,
+                                 problem._options)
+        assert out.unloaded.status[i] == int(free.status)
+        assert out.unloaded.iterations[i] == free.iterations
+        assert deviation(out.unloaded.states[i], free.x) <= RTOL
+        assert single.success and np.isfinite(out.force[i])
+        assert abs(out.force[i] - single.force) <= RTOL * abs(single.force)
+        assert out.iterations[i] == single.iterations
+        assert out.stable[i] == single.stable and out.fraction[i] == single.fraction
+        assert deviation(out.states[i], single.x) <= RTOL
+        assert deviation(out.tips[i], problem.node_jacobian(single.x, 8)[0]) <= RTOL
+
+
+@pytest.mark.parametrize('design, pressures, match', [
+    ([0, 3], [0.0, 0.0], '`design`'),
+    ([0, -1], [0.0, 0.0], '`design`'),
+    ([0, 1], [0.0], '`design` and `pressures`'),
+    ([[0, 1]], [[0.0, 0.0]], '`design` and `pressures`'),
+])
+def test_engine_batches_reject_bad_indices(design, pressures, match):
+    problems = _problems()[:2]
+    forces = np.zeros((len(np.ravel(pressures)), 1, 2))
+    with pytest.raises(ValueError, match=match):
+        engine.solve_batch(problems, design, pressures, [8], forces, problems[0]._options, 8)
+    with pytest.raises(ValueError, match=match):
+        engine.rigidity_batch(problems, design, pressures, 8, [1.0, 0.0], 0.01,
+                              problems[0]._options)
+
+
+class _NotCompiled:
+    """A discretisation without `kernel_data`: the engine can run it, a batch cannot."""
+
+    def __init__(self, solver):
+        self.gradient_scale = solver.gradient_scale
+        self.flat = solver.flat
+
+
+@pytest.mark.parametrize('make, exc, match', [
+    (lambda d: [CCMSolver(d, 8), CCMSolver(d, 6)], ValueError, 'one type, size'),
+    (lambda d: [CCMSolver(d, 22), PCCSolver(d, 22)], ValueError, 'one type, size'),
+    # A narrower channel: another gradient scale, so other packed options.
+    (lambda d: [CCMSolver(d, 8), CCMSolver(d.replace(Cy=0.024), 8)], ValueError, 'options'),
+    (lambda d: [CCMSolver(d, 8), _NotCompiled(CCMSolver(d, 8))], TypeError, 'kernel_data'),
+    (lambda d: [], TypeError, 'kernel_data'),
+])
+def test_engine_batches_reject_mixed_problems(make, exc, match):
+    problems = make(ActuatorDesign.paper(0.25))
+    options = problems[0]._options if problems else CCMSolver(
+        ActuatorDesign.paper(0.25), 8)._options
+    design = [0, len(problems) - 1] if problems else []
+    pressures = [0.0] * len(design)
+    with pytest.raises(exc, match=match):
+        engine.solve_batch(problems, design, pressures, [], np.zeros((len(design), 0, 2)),
+                           options, 8)
+    with pytest.raises(exc, match=match):
+        engine.rigidity_batch(problems, design, pressures, 8, [1.0, 0.0], 0.01, options)

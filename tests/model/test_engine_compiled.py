@@ -1,0 +1,390 @@
+"""The engine's one loop, compiled and interpreted: same answers, real kernels, honest cache."""
+
+import copy
+import pathlib
+
+from helpers import deviation, fd_derivative
+import numba
+import numpy as np
+import pytest
+
+from fpc_gripper.model import ActuatorDesign, CCMSolver, engine, kernels, pcc_kernels
+from fpc_gripper.model.engine import SolverStatus
+from fpc_gripper.model.pcc import PCCSolver
+
+#: Compiled against interpreted: the same loop over the same kernels. The Newton steps
+#: come out bitwise equal or nearly (seen <= 3e-14 on a failed continuation's last
+#: iterate, <= 6e-15 on a rigidity, where the interpreted CCM solves by LU and the
+#: compiled one by Cholesky).
+RTOL = 1e-12
+#: Warm against cold: both converged to xtol = 1e-9 (scaled units) of the one equilibrium.
+WARM_RTOL = 1e-9
+MODEL = pathlib.Path(engine.__file__).resolve().parent
+
+
+class Interpreted:
+    """
+    A discretisation without `kernel_data`: the engine runs its loops in Python on it.
+
+    Every hook forwards to the wrapped solver's methods, so the physics is the solver's
+    and only the loop's execution differs.
+    """
+
+    def __init__(self, solver):
+        self._solver = solver
+        self.gradient_scale = solver.gradient_scale
+        self.calls = 0
+
+    def flat(self):
+        return self._solver.flat()
+
+    def derivatives(self, x, pressure, loads):
+        self.calls += 1
+        return self._solver.derivatives(x, pressure, loads)
+
+    def energy(self, x, pressure, loads):
+        return self._solver.energy(x, pressure, loads)
+
+    def step(self, grad, hess):
+        return self._solver.step(grad, hess)
+
+    def solve_linear(self, hess, rhs):
+        return self._solver.solve_linear(hess, rhs)
+
+    def node_jacobian(self, x, node):
+        return self._solver.node_jacobian(x, node)
+
+
+def _tip(solver):
+    return solver.n_segments
+
+
+def _loads(solver, force):
+    return [(_tip(solver), np.array(force, dtype=float))] if any(force) else []
+
+
+def _cold_newton_fails(solver, pressure, loads):
+    out = engine.newton(solver, solver.flat(), pressure, loads, solver._options)
+    return out.status not in (SolverStatus.SUCCESS, SolverStatus.UNSTABLE)
+
+
+# (solver, pressure [Pa], tip force [N], what the solve must go through). 'continuation':
+# Newton from flat fails and the marched loading succeeds; 'failed': it stalls part way.
+CCM_SCENES = {
+    'unloaded': (lambda: CCMSolver(ActuatorDesign.paper(0.25), 8), 150e3, (0.0, 0.0),
+                 'newton'),
+    'loaded': (lambda: CCMSolver(ActuatorDesign.paper(0.25), 8), 100e3, (0.3, -0.2),
+               'newton'),
+    'consistent': (lambda: CCMSolver(ActuatorDesign.paper(0.40), 8,
+                                     reconstruction='consistent'), 200e3, (-0.1, 0.1),
+                   'newton'),
+    'continuation': (lambda: CCMSolver(ActuatorDesign.paper(0.15), 8, max_iterations=8),
+                     0.0, (-30.0, 0.0), 'continuation'),
+    'failed': (lambda: CCMSolver(ActuatorDesign.paper(0.15), 8, max_iterations=6), 0.0,
+               (-1000.0, 0.0), 'failed'),
+}
+PCC_SCENES = {
+    'unloaded': (lambda: PCCSolver(ActuatorDesign.paper(0.40), 22), 150e3, (0.0, 0.0),
+                 'newton'),
+    'loaded': (lambda: PCCSolver(ActuatorDesign.paper(0.40), 22), 100e3, (0.3, -0.2),
+               'newton'),
+    # 20 N of compression buckles the finger: Newton meets indefinite Hessians.
+    'buckling': (lambda: PCCSolver(ActuatorDesign.paper(0.15), 64), 200e3, (-20.0, 0.0),
+                 'newton'),
+    'continuation': (lambda: PCCSolver(ActuatorDesign.paper(0.40), 22), 0.0, (0.0, 30.0),
+                     'continuation'),
+    'failed': (lambda: PCCSolver(ActuatorDesign.paper(0.40), 22), 0.0, (1000.0, 0.0),
+               'failed'),
+}
+SCENES = {**{f'ccm-{k}': v for k, v in CCM_SCENES.items()},
+          **{f'pcc-{k}': v for k, v in PCC_SCENES.items()}}
+
+
+@pytest.mark.parametrize('name', sorted(SCENES))
+def test_compiled_and_interpreted_loops_agree(name):
+    make, pressure, force, path = SCENES[name]
+    solver = make()
+    loads = _loads(solver, force)
+    python = Interpreted(solver)
+    compiled = engine.solve(solver, pressure, loads, solver._options)
+    interpreted = engine.solve(python, pressure, loads, solver._options)
+    assert python.calls > 0                        # the wrapper really ran the loop
+    # The scene goes where it was picked to go.
+    if path == 'newton':
+        assert compiled.status is SolverStatus.SUCCESS and not _cold_newton_fails(
+            solver, pressure, loads)
+    elif path == 'continuation':
+        assert _cold_newton_fails(solver, pressure, loads)
+        assert compiled.status is SolverStatus.SUCCESS
+        assert compiled.iterations > solver._options.max_iterations
+    else:
+        assert compiled.status is SolverStatus.CONTINUATION_FAILED
+        assert 0.0 < compiled.fraction < 1.0
+    assert interpreted.status is compiled.status
+    assert interpreted.iterations == compiled.iterations
+    assert interpreted.fraction == compiled.fraction    # a dyadic fraction of the loading
+    assert deviation(interpreted.x, compiled.x) <= RTOL
+    tip_c = solver.node_jacobian(compiled.x, _tip(solver))[0]
+    tip_i = solver.node_jacobian(interpreted.x, _tip(solver))[0]
+    assert deviation(tip_i, tip_c) <= RTOL
+
+
+@pytest.mark.parametrize('axis', ['x', 'z'])
+@pytest.mark.parametrize('make', [
+    lambda: CCMSolver(ActuatorDesign.paper(0.25), 8),
+    lambda: CCMSolver(ActuatorDesign.paper(0.25), 8, reconstruction='consistent'),
+    lambda: PCCSolver(ActuatorDesign.paper(0.25), 22),
+], ids=['ccm', 'ccm_consistent', 'pcc'])
+def test_compiled_and_interpreted_rigidity_agree(make, axis):
+    solver = make()
+    direction = {'x': np.array([1.0, 0.0]), 'z': np.array([0.0, 1.0])}[axis]
+    free = engine.solve(solver, 30e3, [], solver._options)
+    assert free.status is SolverStatus.SUCCESS
+    python = Interpreted(solver)
+    compiled = engine.rigidity(solver, free.x, 30e3, _tip(solver), direction, 0.010,
+                               solver._options)
+    interpreted = engine.rigidity(python, free.x, 30e3, _tip(solver), direction, 0.010,
+                                  solver._options)
+    assert python.calls > 0
+    assert compiled.success and interpreted.success
+    assert interpreted.iterations == compiled.iterations
+    assert interpreted.stable == compiled.stable
+    assert abs(interpreted.force - compiled.force) <= RTOL * abs(compiled.force)
+    assert deviation(interpreted.x, compiled.x) <= RTOL
+    # Both met the displacement, measured independently of either loop.
+    j = 0 if axis == 'x' else 1
+    for out in (compiled, interpreted):
+        moved = solver.node_jacobian(out.x, _tip(solver))[0][j] - \
+            solver.node_jacobian(free.x, _tip(solver))[0][j]
+        assert abs(moved - 0.010) <= 1e-9 * 0.010
+
+
+def test_a_solver_with_kernel_data_runs_compiled():
+    # The compiled path never calls the solver's Python hooks: make them fail.
+    solver = CCMSolver(ActuatorDesign.paper(0.25), 8)
+    reference = engine.solve(solver, 80e3, _loads(solver, (0.2, 0.1)), solver._options)
+
+    def broken(*args):
+        raise AssertionError('the Python hook was called')
+    for name in ('derivatives', 'energy', 'step', 'solve_linear', 'node_jacobian'):
+        setattr(solver, name, broken)
+    again = engine.solve(solver, 80e3, _loads(solver, (0.2, 0.1)), solver._options)
+    assert again.iterations == reference.iterations
+    assert deviation(again.x, reference.x) <= RTOL
+    free = engine.solve(solver, 80e3, [], solver._options)
+    assert engine.rigidity(solver, free.x, 80e3, 8, np.array([1.0, 0.0]), 0.01,
+                           solver._options).success
+    with pytest.raises(AssertionError, match='Python hook'):
+        engine.solve(Interpreted(solver), 80e3, [], solver._options)
+    assert not numba.config.DISABLE_JIT
+
+
+def _hook_arguments(solver, data, loaded):
+    """(x, pressure, nodes, forces) of a converged loaded or unloaded state of `solver`."""
+    force = (0.3, -0.2) if loaded else (0.0, 0.0)
+    loads = _loads(solver, force)
+    out = engine.solve(solver, 100e3, loads, solver._options)
+    assert out.status is SolverStatus.SUCCESS
+    nodes, forces = kernels.load_arrays(loads)
+    x = out.x + 0.01                      # off the equilibrium: a gradient worth solving
+    return x, 100e3, nodes, forces
+
+
+@pytest.mark.parametrize('kind', ['CCMBlocks', 'CCMDense', 'PCCData'])
+def test_every_hook_is_a_compiled_kernel(kind):
+    design = ActuatorDesign.paper(0.25)
+    solver = PCCSolver(design, 22) if kind == 'PCCData' else CCMSolver(design, 8)
+    loaded = kind == 'CCMDense'
+    data = solver.kernel_data(loaded)
+    assert type(data).__name__ == kind
+    hooks = type(data)._kernels
+    assert sorted(hooks) == ['derivatives', 'energy', 'node_jacobian', 'solve_linear', 'step']
+    x, pressure, nodes, forces = _hook_arguments(solver, data, loaded)
+    energy, grad, hess = hooks['derivatives'](data, x, pressure, nodes, forces)
+    # The line search compares this energy with the derivatives' one: the same formula.
+    assert hooks['energy'](data, x, pressure, nodes, forces) == energy
+    if kind == 'CCMBlocks':
+        dense = np.zeros((grad.size, grad.size))
+        for i, block in enumerate(hess):
+            dense[4 * i:4 * i + 4, 4 * i:4 * i + 4] = block
+    elif kind == 'CCMDense':
+        dense = hess[0]
+    else:
+        dense = pcc_kernels._dense_from_band(hess[0])
+    assert np.linalg.eigvalsh(dense).min() > 0.0          # the Cholesky paths
+    step, min_eig = hooks['step'](data, grad, hess)
+    assert min_eig == 1.0
+    np.testing.assert_allclose(step.ravel(), np.linalg.solve(dense, -grad.ravel()),
+                               rtol=1e-9, atol=1e-9 * np.abs(step).max())
+    rhs = np.random.default_rng(0).normal(size=grad.shape)
+    solution, ok = hooks['solve_linear'](data, hess, rhs)
+    assert ok
+    np.testing.assert_allclose(solution.ravel(), np.linalg.solve(dense, rhs.ravel()),
+                               rtol=1e-9, atol=1e-9 * np.abs(solution).max())
+    position, jacobian = hooks['node_jacobian'](data, x, _tip(solver))
+    assert deviation(position, solver.node_jacobian(x, _tip(solver))[0]) <= RTOL
+    assert jacobian.shape == (2,) + x.shape
+    for name, hook in hooks.items():
+        assert isinstance(hook, numba.core.registry.CPUDispatcher), name
+        assert hook.signatures and hook.targetoptions['nopython'], name
+    # The engine's entries compiled for this namedtuple type.
+    engine.solve(solver, 50e3, _loads(solver, (0.1, 0.0) if loaded else (0.0, 0.0)),
+                 solver._options)
+    types = {getattr(sig[0], 'instance_class', None) for sig in engine._solve_entry.signatures}
+    assert type(data) in types
+
+
+# -- the consistent CCM with point loads: dense compiled Hessian against differences ----
+def _consistent_solver():
+    return CCMSolver(ActuatorDesign.paper(0.3), n_segments=6, reconstruction='consistent',
+                     load_points=(0.05,))
+
+
+@pytest.mark.parametrize('tip, point', [((0.0, 0.0), None), ((0.7, -1.3), None),
+                                        ((0.7, -1.3), (0.05, -0.4, 0.9))],
+                         ids=['unloaded', 'tip', 'tip-and-point'])
+def test_consistent_derivatives_match_finite_differences(tip, point):
+    # test_ladder checks the consistent CCM's dense Hessian with a tip load on uniform
+    # segments; here the unloaded blocks and an intermediate point load too, through
+    # CCMSolver.derivatives (the compiled hooks), against fourth-order differences.
+    solver = _consistent_solver()
+    loads = solver._loads(tip, [point] if point else [])
+    n = solver.n_segments
+    x = np.random.default_rng(11).normal(scale=0.15, size=4 * n)
+
+    def energy(v):
+        return np.array(solver.energy(v.reshape(n, 4), 150e3, loads))
+
+    def gradient(v):
+        return solver.derivatives(v.reshape(n, 4), 150e3, loads)[1].ravel()
+
+    _, grad, hess = solver.derivatives(x.reshape(n, 4), 150e3, loads)
+    if not loads:
+        assert hess.shape == (n, 4, 4)
+        blocks, hess = hess, np.zeros((4 * n, 4 * n))
+        for i in range(n):
+            hess[4 * i:4 * i + 4, 4 * i:4 * i + 4] = blocks[i]
+    else:
+        assert hess.shape == (4 * n, 4 * n)
+    g_fd = fd_derivative(energy, x, 1e-4)
+    h_fd = fd_derivative(gradient, x, 1e-4)
+    assert deviation(grad.ravel(), g_fd) <= 1e-8
+    assert deviation(hess, h_fd) <= 1e-8
+    assert deviation(hess, hess.T) <= 1e-13
+    if not loads:
+        return
+    # The loads' part on its own scale: beside the segments' stiffness (1e4 times
+    # larger here) an error in it would hide in the totals' tolerance.
+    _, free_grad, free_blocks = solver.derivatives(x.reshape(n, 4), 150e3, [])
+    free_hess = np.zeros_like(hess)
+    for i in range(n):
+        free_hess[4 * i:4 * i + 4, 4 * i:4 * i + 4] = free_blocks[i]
+
+    def load_energy(v):
+        return energy(v) - solver.energy(v.reshape(n, 4), 150e3, [])
+
+    def load_gradient(v):
+        return gradient(v) - solver.derivatives(v.reshape(n, 4), 150e3, [])[1].ravel()
+
+    assert deviation((grad - free_grad).ravel(), fd_derivative(load_energy, x, 1e-4)) <= 1e-8
+    assert deviation(hess - free_hess, fd_derivative(load_gradient, x, 1e-4)) <= 1e-8
+
+
+def test_dense_hook_factor_is_the_cholesky_factor_of_its_hessian():
+    # The compiled loop steps and solves with the factor the dense hook returns; the
+    # Python hooks never see it. It must factor H where H is definite, and say so.
+    solver = _consistent_solver()
+    data = solver.kernel_data(True)
+    n = solver.n_segments
+    rng = np.random.default_rng(5)
+    seen = set()
+    for force, scale in (((0.3, -0.2), 0.05), ((-40.0, 0.0), 0.05), ((0.5, 0.5), 0.4)):
+        nodes, forces = kernels.load_arrays(solver._loads(force, []))
+        for _ in range(3):
+            q = rng.normal(scale=scale, size=(n, 4))
+            _, _, (matrix, low, definite) = data._kernels['derivatives'](data, q, 50e3, nodes,
+                                                                         forces)
+            lam = np.linalg.eigvalsh(matrix)
+            assert definite == (lam.min() > 0.0)
+            seen.add(bool(definite))
+            if definite:
+                assert np.all(np.triu(low, 1) == 0.0)      # lower triangular: exact zeros
+                assert deviation(low @ low.T, matrix) <= 1e-13
+    assert seen == {True, False}
+
+
+# -- the disk cache and warm starts ---------------------------------------------------------
+ENTRIES = ('_newton_entry', '_solve_entry', '_rigidity_entry', '_solve_batch_entry',
+           '_rigidity_batch_entry')
+
+
+@pytest.mark.parametrize('entry', ENTRIES)
+def test_cache_stamp_covers_every_model_source(entry):
+    # engine._cached extends numba's (0.68) private stamp; a numba upgrade that renames
+    # it would silently leave edited kernels running their stale compiled code.
+    cache_file = getattr(engine, entry)._cache._cache_file
+    own, sources = cache_file._source_stamp
+    files = sorted(MODEL.glob('*.py'))
+    assert [name for name, _, _ in sources] == [path.name for path in files]
+    for (name, mtime, size), path in zip(sources, files):
+        assert (mtime, size) == (path.stat().st_mtime_ns, path.stat().st_size), name
+    assert own                                  # numba's own stamp of engine.py is kept
+
+
+def test_cache_index_goes_stale_when_a_kernel_source_changes():
+    # numba compares the stamp stored in the index with the dispatcher's: the entries
+    # written under the extended stamp load, and a kernel module's new mtime misses.
+    solver = CCMSolver(ActuatorDesign.paper(0.25), 8)
+    engine.solve(solver, 10e3, [], solver._options)
+    cache_file = engine._solve_entry._cache._cache_file
+    assert cache_file._load_index()                       # fresh: entries found
+    own, sources = cache_file._source_stamp
+    edited = tuple((name, mtime + (name == 'kernels.py'), size)
+                   for name, mtime, size in sources)
+    assert edited != sources
+    stale = copy.copy(cache_file)
+    stale._source_stamp = (own, edited)
+    assert stale._load_index() == {}
+
+
+WARM_CASES = {
+    'ccm': (lambda: CCMSolver(ActuatorDesign.paper(0.25), 8), 120e3, (0.1, -0.2),
+            [(110e3, (0.0, 0.0)), (300e3, (0.5, 0.5)), (0.0, (-2.0, 0.0))]),
+    'ccm_consistent': (lambda: CCMSolver(ActuatorDesign.paper(0.40), 8,
+                                         reconstruction='consistent'),
+                       200e3, (0.0, 0.0), [(190e3, (0.0, 0.0)), (0.0, (0.3, 0.3))]),
+    'pcc': (lambda: PCCSolver(ActuatorDesign.paper(0.25), 22), 120e3, (0.1, -0.2),
+            [(110e3, (0.0, 0.0)), (300e3, (0.5, 0.5)), (0.0, (-2.0, 0.0))]),
+    # A buckled state under 20 N of compression warm-starts the slightly loaded finger.
+    'pcc_buckled': (lambda: PCCSolver(ActuatorDesign.paper(0.15), 64), 200e3, (-1.0, 0.0),
+                    [(200e3, (-20.0, 0.0)), (0.0, (0.0, 0.0))]),
+}
+
+
+@pytest.mark.parametrize('name', sorted(WARM_CASES))
+def test_warm_start_never_changes_the_answer(name):
+    make, pressure, force, history = WARM_CASES[name]
+    solver = make()
+    loads = _loads(solver, force)
+    cold = engine.solve(solver, pressure, loads, solver._options)
+    assert cold.status is SolverStatus.SUCCESS
+    tip = solver.node_jacobian(cold.x, _tip(solver))[0]
+    starts = [engine.solve(solver, p, _loads(solver, f), solver._options).x
+              for p, f in history]
+    spent = set()
+    for start in starts:
+        warm = engine.solve(solver, pressure, loads, solver._options, initial=start)
+        assert warm.status is cold.status
+        assert deviation(solver.node_jacobian(warm.x, _tip(solver))[0], tip) <= WARM_RTOL
+        spent.add(warm.iterations)
+    assert spent - {cold.iterations}             # some start really was used
+    # A start Newton cannot converge from: the solve begins again from flat, and spends
+    # the warm attempt's iterations on top of the cold ones.
+    bad = solver.flat() + 5.0
+    attempt = engine.newton(solver, bad, pressure, loads, solver._options)
+    assert attempt.status is not SolverStatus.SUCCESS
+    fallback = engine.solve(solver, pressure, loads, solver._options, initial=bad)
+    assert fallback.status is cold.status
+    assert fallback.iterations == attempt.iterations + cold.iterations
+    # From flat again: the cold solve's arithmetic (round-off apart, see RTOL).
+    assert deviation(fallback.x, cold.x) <= RTOL
