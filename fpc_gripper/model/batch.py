@@ -5,7 +5,7 @@ import numpy as np
 from . import engine
 from .analysis import flexural_rigidity
 from .design import ActuatorDesign
-from .pipeline import finger_model, model_label, ModelSettings, rung_label
+from .pipeline import finger_model, model_label, ModelSettings, rung_label, solver_label
 from .selection import AdaptiveSolver
 from .solver import AXES, CCMResult, CCMSolver, check_rigidity, rigidity_result, SolverStatus
 
@@ -280,7 +280,7 @@ def solve_grid(designs, pressures, tip_forces=((0.0, 0.0),), settings=ModelSetti
         out.tip[index] = batch.tips
         adaptive = [k for k, scene in enumerate(index) if scene in out._choices]
         if len(adaptive) < index.size:
-            out.models[index] = model_label(_Segments(solvers[0].n_segments))
+            out.models[index] = solver_label(solvers[0])
         if not adaptive:
             continue
         valid = (CCMResult.small_rotations(batch.states) if isinstance(solvers[0], CCMSolver)
@@ -294,14 +294,6 @@ def solve_grid(designs, pressures, tip_forces=((0.0, 0.0),), settings=ModelSetti
             else:
                 out.models[scene] = rung_label(choice.rung, choice.n_segments)
     return out._finish()
-
-
-class _Segments:
-    """What `pipeline.model_label` reads of a fixed CCM's result: its solver's N."""
-
-    def __init__(self, n_segments):
-        self.solver = self
-        self.n_segments = n_segments
 
 
 class _Verdict:
@@ -434,7 +426,7 @@ def rigidity_grid(designs, pressures, axis='x', displacement=0.010, settings=Mod
 
 def _label(solver, choice):
     return rung_label(choice.rung, choice.n_segments) if choice is not None \
-        else f'ccm N={solver.n_segments}'
+        else solver_label(solver)
 
 
 def _store_rigidity(out, scene, result, choice, solver):

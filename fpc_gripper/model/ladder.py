@@ -263,6 +263,7 @@ class ArcSolver(_LadderSolver):
     """
 
     _result_type = ArcResult
+    rung = 'arc'
 
     def __init__(self, design, pressure_model='adiabatic', tol=1e-12, samples=129,
                  max_iterations=60):
@@ -493,6 +494,7 @@ class RodSolver(_LadderSolver):
     """
 
     _result_type = RodResult
+    rung = 'rod'
 
     def __init__(self, design, pressure_model='adiabatic', tol=1e-10, ribs='exact', degree=8,
                  max_element_length=0.010, samples=129, max_iterations=60):

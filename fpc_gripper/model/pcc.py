@@ -186,6 +186,7 @@ class PCCSolver(_LadderSolver):
     """
 
     _result_type = PCCResult
+    rung = 'pcc'
 
     def __init__(self, design, n_segments=64, pressure_model='adiabatic', tol=1e-12,
                  samples=129, max_iterations=60):

@@ -11,7 +11,7 @@ from .selection import AdaptiveSolver
 from .solver import CCMSolver, PRESSURE_MODELS
 
 __all__ = ['DEFAULT_TOLERANCE', 'DEFAULT_N_SEGMENTS', 'MAX_SEGMENTS', 'ModelSettings',
-           'finger_model', 'model_label', 'rung_label']
+           'finger_model', 'model_label', 'rung_label', 'solver_label']
 
 #: Default tip-position tolerance against the geometrically exact rod [m].
 DEFAULT_TOLERANCE = 5e-5
@@ -102,8 +102,15 @@ def model_label(result):
     choice = getattr(result, 'model_choice', None)
     if choice is not None:
         return rung_label(choice.rung, choice.n_segments)
-    segments = getattr(getattr(result, 'solver', None), 'n_segments', None)
-    return f'ccm N={segments}' if segments else type(result).__name__
+    solver = getattr(result, 'solver', None)
+    if getattr(solver, 'rung', None) is None:
+        return type(result).__name__
+    return solver_label(solver)
+
+
+def solver_label(solver):
+    """Return the label of the rung and N of a solver, e.g. 'pcc N=22', 'ccm N=8' or 'rod'."""
+    return rung_label(solver.rung, 0 if solver.rung in ('arc', 'rod') else solver.n_segments)
 
 
 def rung_label(rung, n_segments):

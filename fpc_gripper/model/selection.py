@@ -127,8 +127,10 @@ def make_solver(rung, n_segments, design, pressure_model='adiabatic'):
         return CCMSolver(design, n_segments=int(n_segments), pressure_model=pressure_model,
                          reconstruction='consistent')
     if rung == 'ccm_aligned':
-        return CCMSolver(design, segment_edges=aligned_edges(design, n_segments),
-                         pressure_model=pressure_model, reconstruction='consistent')
+        solver = CCMSolver(design, segment_edges=aligned_edges(design, n_segments),
+                           pressure_model=pressure_model, reconstruction='consistent')
+        solver.rung = 'ccm_aligned'
+        return solver
     if rung == 'pcc':
         return PCCSolver(design, n_segments=int(n_segments), pressure_model=pressure_model)
     if rung == 'rod':

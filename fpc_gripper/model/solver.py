@@ -280,6 +280,8 @@ class CCMSolver:
             raise ValueError(f'`reconstruction` must be one of {RECONSTRUCTIONS}, '
                              f'got {reconstruction!r}')
         self.reconstruction = reconstruction
+        #: The ladder rung this solver is ('ccm_aligned' when `selection` aligns its edges).
+        self.rung = 'ccm' if reconstruction == 'paper' else 'ccm_consistent'
         self.design = design
         self.pressure_model = pressure_model
         self.pressure_coefficient = PRESSURE_MODELS[pressure_model]

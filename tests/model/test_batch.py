@@ -155,10 +155,8 @@ def _chosen_label(model, pressure):
 
 
 def test_rigidity_result_is_labelled_with_its_model(designs):
-    # BUG (found writing these tests): AdaptiveSolver.rigidity returns results without
-    # `model_choice`, and `model_label` then names every unlabelled result 'ccm N=<n>',
-    # whatever its solver: the default model's PCC rung comes out as 'ccm N=22', while
-    # the grid (rightly) says 'pcc N=22'.
+    # AdaptiveSolver.rigidity's results carry no `model_choice`: `model_label` must name
+    # them by their solver's rung (it once called every such result 'ccm N=<n>').
     settings = ModelSettings()
     out = rigidity_grid(designs[1], [0.0], 'x', 0.010, settings)
     single = finger_model(designs[1], settings).rigidity(0.0, 'x', 0.010)
@@ -341,3 +339,14 @@ def test_engine_batches_reject_mixed_problems(make, exc, match):
                            options, 8)
     with pytest.raises(exc, match=match):
         engine.rigidity_batch(problems, design, pressures, 8, [1.0, 0.0], 0.01, options)
+
+
+@pytest.mark.parametrize('rung, n, label', [
+    ('ccm', 8, 'ccm N=8'), ('ccm_consistent', 8, 'ccm_consistent N=8'),
+    ('ccm_aligned', 22, 'ccm_aligned N=22'), ('pcc', 22, 'pcc N=22'), ('arc', 1, 'arc'),
+])
+def test_model_label_names_the_rung_of_an_unlabelled_result(rung, n, label):
+    from fpc_gripper.model.selection import make_solver
+    result = make_solver(rung, n, ActuatorDesign.paper(0.25)).solve(50e3)
+    assert not hasattr(result, 'model_choice')
+    assert model_label(result) == label
