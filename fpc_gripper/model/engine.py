@@ -772,7 +772,8 @@ def _batch_inputs(problems, loaded, options):
     """Typed list of compiled discretisations, flat state, options and cap; checks them."""
     datas = [_compiled(problem, loaded) for problem in problems]
     if not datas or any(data is None for data in datas):
-        raise TypeError('a batch needs discretisations that run compiled (`kernel_data`)')
+        raise TypeError('`problems` must be a non-empty sequence of discretisations that run '
+                        'compiled (with `kernel_data`)')
     flat = _flat(problems[0])
     opts, cap = _packed(problems[0], options, flat.shape)
     for problem, data in zip(problems, datas):
@@ -780,7 +781,8 @@ def _batch_inputs(problems, loaded, options):
         if type(data) is not type(datas[0]) or other.shape != flat.shape \
                 or _packed(problem, options, flat.shape)[0] != opts \
                 or not np.array_equal(_packed(problem, options, flat.shape)[1], cap):
-            raise ValueError('a batch needs discretisations of one type, size and options')
+            raise ValueError('`problems` must share one discretisation type, number of '
+                             'unknowns and options')
     return numba.typed.List(datas), flat, opts, cap
 
 

@@ -321,8 +321,8 @@ class _NotCompiled:
 
 
 @pytest.mark.parametrize('make, exc, match', [
-    (lambda d: [CCMSolver(d, 8), CCMSolver(d, 6)], ValueError, 'one type, size'),
-    (lambda d: [CCMSolver(d, 22), PCCSolver(d, 22)], ValueError, 'one type, size'),
+    (lambda d: [CCMSolver(d, 8), CCMSolver(d, 6)], ValueError, '`problems` must share'),
+    (lambda d: [CCMSolver(d, 22), PCCSolver(d, 22)], ValueError, '`problems` must share'),
     # A narrower channel: another gradient scale, so other packed options.
     (lambda d: [CCMSolver(d, 8), CCMSolver(d.replace(Cy=0.024), 8)], ValueError, 'options'),
     (lambda d: [CCMSolver(d, 8), _NotCompiled(CCMSolver(d, 8))], TypeError, 'kernel_data'),
