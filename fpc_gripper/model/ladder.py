@@ -1,5 +1,6 @@
 """Model ladder beyond the CCM: a uniform arc (rung a) and a geometrically exact rod (rung d)."""
 
+import functools
 import math
 
 import numpy as np
@@ -13,7 +14,7 @@ from .kernels import load_arrays
 from .pcc_kernels import section_arrays
 from .section_law import station_layout
 from .solver import AXES, check_rigidity, PRESSURE_MODELS, rigidity_result
-from .validation import real_number
+from .validation import real_number, real_pair
 
 __all__ = ['ArcSolver', 'RodSolver', 'LadderResult', 'RodResult', 'ArcResult']
 
@@ -86,15 +87,36 @@ class LadderResult(CircleFitted):
         self.iterations = int(iterations)
         self.last_step = float(step)
         self.pressure = float(pressure)
-        self.tip_force = tuple(float(f) for f in tip_force)
+        self.tip_force = (float(tip_force[0]), float(tip_force[1]))
         self.valid = True
-        self.message = _MESSAGES[self.status].format(
-            step=step, tol=solver.tol, iterations=iterations, fraction=fraction)
-        out = solver._outputs(state, self.pressure, np.array(self.tip_force))
-        self.points, self.tangent, self.strains = out['points'], out['tangent'], out['strains']
-        self.tip, self.beta, self.coefficients = out['tip'], out['beta'], out['coefficients']
-        self.nodes = out['nodes']
-        self.energy = out['energy']
+        self._figures = (step, iterations, fraction)
+
+    @functools.cached_property
+    def message(self):
+        """What happened, with the figures behind `status`."""
+        step, iterations, fraction = self._figures
+        return _MESSAGES[self.status].format(step=step, tol=self.solver.tol,
+                                             iterations=iterations, fraction=fraction)
+
+    # The outputs are built on first use: a caller reading the tip pays for the samples only
+    # when it reads them.
+    @functools.cached_property
+    def _out(self):
+        return self.solver._outputs(self.state, self.pressure, np.array(self.tip_force))
+
+    points = property(lambda self: self._out['points'],
+                      doc='Global (X, Z) midplane samples, root first, tip last [m].')
+    tangent = property(lambda self: self._out['tangent'],
+                       doc='Tangent angle theta of every sample from +X towards +Z [rad].')
+    strains = property(lambda self: self._out['strains'],
+                       doc='(eps [-], kappa [1/m], c1 [-]) at every sample.')
+    tip = property(lambda self: self._out['tip'], doc='Global (X, Z) of the tip [m].')
+    beta = property(lambda self: self._out['beta'],
+                    doc='Rotation of every element [rad].')
+    coefficients = property(lambda self: self._out['coefficients'],
+                            doc='CCM coefficients (b1, b3, c1, d) of every segment, or None.')
+    nodes = property(lambda self: self._out['nodes'], doc='Segment ends [m].')
+    energy = property(lambda self: self._out['energy'], doc='Total potential [J].')
 
     def __repr__(self):
         return (f'{type(self).__name__}(success={self.success}, status={self.status.name}, '
@@ -135,11 +157,7 @@ def _check_solve(pressure, tip_force):
     pressure = real_number('pressure', pressure, '[Pa]')
     if pressure < 0.0:
         raise ValueError(f'`pressure` must be >= 0 (gauge) [Pa], got {pressure}')
-    if np.shape(tip_force) != (2,):
-        raise ValueError(f'`tip_force` must be (f0, p0) [N], got {tip_force!r}')
-    force = np.array([real_number('tip_force[0]', tip_force[0], '[N]'),
-                      real_number('tip_force[1]', tip_force[1], '[N]')])
-    return pressure, force
+    return pressure, np.array(real_pair('tip_force', tip_force, '[N]'))
 
 
 class _LadderSolver:

@@ -1,5 +1,6 @@
 """Model selection on the ladder (arc, CCM-N, rod) and automatic segment refinement."""
 
+import bisect
 from dataclasses import dataclass
 import functools
 import json
@@ -16,7 +17,7 @@ from .pcc import PCCSolver
 from .section import uniform_edges
 from .section_law import station_layout
 from .solver import CCMSolver, PRESSURE_MODELS, SolverStatus
-from .validation import real_number
+from .validation import real_number, real_pair
 
 __all__ = ['Scene', 'ModelChoice', 'RUNGS', 'choose_model', 'load_error_model', 'make_solver',
            'scene_turning', 'a_posteriori_error', 'aligned_edges', 'AdaptiveSolver']
@@ -59,10 +60,7 @@ class Scene:
         if pressure < 0.0:
             raise ValueError(f'`pressure` must be >= 0 (gauge) [Pa], got {pressure}')
         object.__setattr__(self, 'pressure', pressure)
-        if np.shape(self.tip_force) != (2,):
-            raise ValueError(f'`tip_force` must be (f0, p0) [N], got {self.tip_force!r}')
-        object.__setattr__(self, 'tip_force', tuple(
-            real_number(f'tip_force[{i}]', f, '[N]') for i, f in enumerate(self.tip_force)))
+        object.__setattr__(self, 'tip_force', real_pair('tip_force', self.tip_force, '[N]'))
         if self.pressure_model not in PRESSURE_MODELS:
             raise ValueError(f'`pressure_model` must be one of {sorted(PRESSURE_MODELS)}, '
                              f'got {self.pressure_model!r}')
@@ -377,8 +375,9 @@ def _scene_bin(model, scene, turning):
         outside.append(f'turning {turning:.3g} rad')
     if outside:
         return tuple(outside)
-    return (int(np.searchsorted(turn_edges, turning, side='left')),
-            int(np.searchsorted(load_edges, scene.load * (1 - 1e-12), side='left')))
+    # bisect_left on the sorted edges is searchsorted(side='left') without an array copy.
+    return (bisect.bisect_left(turn_edges, turning),
+            bisect.bisect_left(load_edges, scene.load * (1 - 1e-12)))
 
 
 def _static_cost(entry):

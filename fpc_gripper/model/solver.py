@@ -12,7 +12,7 @@ from .energy import node_jacobian
 from .engine import linear_solve, linear_step, NewtonOptions, SolverStatus
 from .kinematics import from_scaled, midplane_samples, node_positions, to_scaled
 from .section import build_segments, uniform_edges
-from .validation import real_number
+from .validation import real_number, real_pair
 
 __all__ = ['CCMSolver', 'CCMResult', 'RigidityResult', 'SolverStatus', 'PRESSURE_MODELS',
            'AXES', 'check_rigidity', 'rigidity_result']
@@ -426,9 +426,7 @@ class CCMSolver:
         pressure = real_number('pressure', pressure, '[Pa]')
         if pressure < 0.0:
             raise ValueError(f'`pressure` must be >= 0 (gauge) [Pa], got {pressure}')
-        if not (isinstance(tip_force, tuple) and len(tip_force) == 2) \
-                and np.shape(tip_force) != (2,):
-            raise ValueError(f'`tip_force` must be (f0, p0) [N], got {tip_force!r}')
+        tip_force = real_pair('tip_force', tip_force, '[N]')
         loads = self._loads(tip_force, point_loads)
         out = engine.solve(self, pressure, loads, self._options, self._initial_state(initial))
         return self._result(out.x, out.status, out.iterations, out.gradient, out.step,

@@ -4,7 +4,7 @@ import math
 
 import numpy as np
 
-__all__ = ['real_number']
+__all__ = ['real_number', 'real_pair']
 
 
 def real_number(name, value, unit):
@@ -35,3 +35,26 @@ def real_number(name, value, unit):
     if not math.isfinite(value):
         raise ValueError(f'`{name}` must be finite {unit}, got {value}')
     return value
+
+
+def real_pair(name, value, unit):
+    """
+    Return `value` as a pair of floats, or raise naming the argument, value and unit.
+
+    Parameters
+    ----------
+    name : str
+        Argument name, e.g. 'tip_force'; items are named 'tip_force[0]' and 'tip_force[1]'.
+    value : object
+        A sequence or array of two real numbers.
+    unit : str
+
+    Raises
+    ------
+    ValueError, TypeError
+        If `value` is not two finite real numbers.
+
+    """
+    if not (isinstance(value, tuple) and len(value) == 2) and np.shape(value) != (2,):
+        raise ValueError(f'`{name}` must be a pair of real numbers {unit}, got {value!r}')
+    return (real_number(f'{name}[0]', value[0], unit), real_number(f'{name}[1]', value[1], unit))
