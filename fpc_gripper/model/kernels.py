@@ -64,6 +64,28 @@ def _pemc_strain(basis, i, p, y, prestrain):
 
 
 @_jit
+def _chain_rule(g, h, jac, work, grad, hess):
+    """Write grad = jac^T g and hess = jac^T h jac (4 x 4), with `work` as scratch."""
+    for b in range(4):
+        acc = 0.0
+        for a in range(4):
+            acc += g[a] * jac[a, b]
+        grad[b] = acc
+    for a in range(4):
+        for b in range(4):
+            acc = 0.0
+            for c in range(4):
+                acc += h[a, c] * jac[c, b]
+            work[a, b] = acc
+    for a in range(4):
+        for b in range(4):
+            acc = 0.0
+            for c in range(4):
+                acc += jac[c, a] * work[c, b]
+            hess[a, b] = acc
+
+
+@_jit
 def segment_energy_kernel(q, stiffness, gas_volume, gas_moments, pemc_basis, pemc_weights,
                           prestrain, law, pressure_work):
     """
@@ -189,23 +211,7 @@ def segment_derivatives_kernel(q, stiffness, gas_volume, gas_moments, pemc_basis
             h_y[3, a] -= pressure_work * gas_moments[i, a]
         # Chain rule y(q): A = q0, B' = 3 q1 + 2 q3^2, D' = q3, C = q2.
         jac[1, 3] = 4.0 * q[i, 3]
-        for b in range(4):
-            acc = 0.0
-            for a in range(4):
-                acc += g_y[a] * jac[a, b]
-            grad[i, b] = acc
-        for a in range(4):
-            for b in range(4):
-                acc = 0.0
-                for c in range(4):
-                    acc += h_y[a, c] * jac[c, b]
-                m[a, b] = acc
-        for a in range(4):
-            for b in range(4):
-                acc = 0.0
-                for c in range(4):
-                    acc += jac[c, a] * m[c, b]
-                hess[i, a, b] = acc
+        _chain_rule(g_y, h_y, jac, m, grad[i], hess[i])
         hess[i, 3, 3] += 4.0 * g_y[1]
     return energy, grad, hess
 
@@ -818,21 +824,15 @@ def _ccm_segment_terms(p, q, pressure):
         qs, p.stiffness, p.gas_volume, p.gas_moments, p.pemc_basis, p.pemc_products,
         p.prestrain, p.law, work)
     n = q.shape[0]
-    grad = np.zeros((n, 4))
-    hess = np.zeros((n, 4, 4))
+    grad = np.empty((n, 4))
+    hess = np.empty((n, 4, 4))
+    work = np.empty((4, 4))
     for i in range(n):
-        for b in range(4):
-            acc = 0.0
-            for a in range(4):
-                acc += g_s[i, a] * jac[i, a, b]
-            grad[i, b] = acc
+        # qs[3] is the one nonlinear component of qs(q): its curvature adds g_s3 hess3.
+        _chain_rule(g_s[i], h_s[i], jac[i], work, grad[i], hess[i])
         for a in range(4):
             for b in range(4):
-                acc = g_s[i, 3] * hess3[i, a, b]
-                for c in range(4):
-                    for d in range(4):
-                        acc += jac[i, c, a] * h_s[i, c, d] * jac[i, d, b]
-                hess[i, a, b] = acc
+                hess[i, a, b] += g_s[i, 3] * hess3[i, a, b]
     return energy.sum(), grad, hess
 
 

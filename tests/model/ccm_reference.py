@@ -55,43 +55,7 @@ def node_positions(q, lengths):
 
 
 def consistent_strain_map(q):
-    """
-    Strain unknowns of the 'consistent' reconstruction, with first and second derivatives.
-
-    The paper draws a segment as U = (1 + b1) x + b3 x^3, W = d x^2 and turns the
-    chain by beta = atan2(2 d L, 1 + b1 + 3 b3 L^2), while the strain
-    e = b1 + (3 b3 + 2 d^2) x^2 - 2 z d bends it by 2 d per reference length.
-    Two inconsistencies follow that do not vanish as N grows: the chain turns
-    by 2 d / (1 + b1) per reference length (deformed curvature 2 d / (1 + b1)^2
-    instead of the rod's kappa / (1 + eps) = 2 d / (1 + b1)), and the axial
-    strain variation B = 3 b3 + 2 d^2 rotates the segment end, so that tip
-    loads drive B away from zero. The consistent reconstruction keeps the
-    paper's kinematics in unknowns qt = (bt1, bt3 L^2, c1, dt L) chosen so that
-    U(L) = (1 + b1) L + b3 L^3 (the integral of the axial strain, as the
-    paper), W(L) = (1 + b1) d L^2 and beta = atan(2 d L), which are the rod's
-    chord and end rotation of a segment to O(L^3):
-
-        b1 = bt1 + 3 bt3 L^2,  b3 L^2 = -2 bt3 L^2,  d L = dt L / (1 + b1).
-
-    Parameters
-    ----------
-    q : ndarray, shape (N, 4)
-        Scaled reconstruction unknowns qt.
-
-    Returns
-    -------
-    qs : ndarray, shape (N, 4)
-        Scaled strain unknowns (b1, b3 L^2, c1, d L) used by the energy.
-    jac : ndarray, shape (N, 4, 4)
-        d qs / d qt.
-    hess3 : ndarray, shape (N, 4, 4)
-        d^2 qs[3] / d qt^2 (the only nonlinear component).
-
-    References
-    ----------
-    docs/physics.md, section 11.1; docs/model_notes.md, "CCM reconstruction vs rod".
-
-    """
+    """Compute `kinematics.consistent_strain_map` in numpy: the same returns."""
     n = q.shape[0]
     stretch = 1.0 + q[:, 0] + 3.0 * q[:, 1]
     inv = 1.0 / stretch

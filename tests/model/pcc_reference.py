@@ -5,7 +5,7 @@ import math
 import numpy as np
 from scipy.linalg import cho_solve_banded, cholesky_banded, eig_banded, LinAlgError, solve_banded
 
-from fpc_gripper.model.pcc import PCCSolver
+from fpc_gripper.model.pcc import _Banded, PCCSolver
 
 #: Taylor coefficients (-1)^k / (2k + 1)! of sin(h)/h in h^2, k = 0..9.
 _SINC = np.array([(-1.0) ** k / math.factorial(2 * k + 1) for k in range(10)])
@@ -43,20 +43,11 @@ def _horner(x, coefficients):
     return out
 
 
-class Banded:
-    """A symmetric band in lower form, ab[d, k] = H[k + d, k], with scipy's solvers."""
+class Banded(_Banded):
+    """A symmetric band in lower form, ab[d, k] = H[k + d, k], for scipy's solvers."""
 
     def __init__(self, lower):
-        self.lower = lower
-
-    def full_band(self):
-        lower = self.lower
-        n = lower.shape[1]
-        band = np.zeros((7, n))
-        band[3:] = lower
-        for d in range(1, 4):
-            band[3 - d, d:] = lower[d, :n - d]
-        return band
+        super().__init__((lower, None, None, False))
 
     def dense(self):
         lower = self.lower
@@ -67,6 +58,17 @@ class Banded:
             out[k + d, k] = lower[d, :n - d]
             out[k, k + d] = lower[d, :n - d]
         return out
+
+
+def random_state(solver, seed, turning=3.0):
+    """Return a state turning by about `turning` rad, eps and c1 near equilibrium."""
+    rng = np.random.default_rng(seed)
+    n = solver.n_segments
+    kappa = -turning / solver.length * (1.0 + 0.3 * rng.normal(size=n))
+    theta = np.cumsum(kappa * solver.lengths)
+    eps = -0.08 + 0.02 * rng.normal(size=n)
+    c1 = 1e-3 * rng.normal(size=n)
+    return solver._pack(np.stack([theta, eps, c1], axis=1))
 
 
 class ReferencePCCSolver(PCCSolver):

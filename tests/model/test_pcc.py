@@ -4,6 +4,7 @@ import math
 
 from helpers import fd_derivative
 import numpy as np
+from pcc_reference import random_state
 import pytest
 
 from fpc_gripper.model import (ActuatorDesign, ArcSolver, PCCResult, PCCSolver, RodSolver,
@@ -42,17 +43,6 @@ def rod_tips():
                 assert result.success, result.message
                 out[scene] = result.tip
     return out
-
-
-def random_state(solver, seed, turning=3.0):
-    """A plausible state: angles turning by about `turning` rad, eps and c1 near equilibrium."""
-    rng = np.random.default_rng(seed)
-    n = solver.n_segments
-    kappa = -turning / solver.length * (1.0 + 0.3 * rng.normal(size=n))
-    theta = np.cumsum(kappa * solver.lengths)
-    eps = -0.08 + 0.02 * rng.normal(size=n)
-    c1 = 1e-3 * rng.normal(size=n)
-    return solver._pack(np.stack([theta, eps, c1], axis=1))
 
 
 # -- building blocks ------------------------------------------------------------------

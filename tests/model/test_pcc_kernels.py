@@ -2,7 +2,7 @@
 
 from helpers import deviation, fd_derivative
 import numpy as np
-from pcc_reference import half_angle_sinc as reference_sinc, ReferencePCCSolver
+from pcc_reference import half_angle_sinc as reference_sinc, random_state, ReferencePCCSolver
 import pytest
 
 from fpc_gripper.model import ActuatorDesign, pcc_kernels
@@ -29,17 +29,6 @@ def load_cases(n):
     return {'none': [], 'tip': [(n, np.array([0.0, 1.0]))],
             'inner': [(n, np.array([-0.4, 0.9])), (max(n // 3, 1), np.array([1.1, 0.6])),
                       (0, np.array([5.0, 5.0]))]}
-
-
-def random_state(solver, seed, turning):
-    """Angles turning by about `turning` rad in all, eps and c1 near an equilibrium."""
-    rng = np.random.default_rng(seed)
-    n = solver.n_segments
-    kappa = -turning / solver.length * (1.0 + 0.3 * rng.normal(size=n))
-    theta = np.cumsum(kappa * solver.lengths)
-    eps = -0.08 + 0.02 * rng.normal(size=n)
-    c1 = 1e-3 * rng.normal(size=n)
-    return solver._pack(np.stack([theta, eps, c1], axis=1))
 
 
 @pytest.fixture(scope='module')
