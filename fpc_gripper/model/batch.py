@@ -251,10 +251,9 @@ def solve_grid(designs, pressures, tip_forces=((0.0, 0.0),), settings=ModelSetti
                     groups.add(model, loaded, block)
             continue
         blocks = {}
-        for k, choice in enumerate(model.choose_many(scene_p, scene_f)):
+        for k, (solver, choice) in enumerate(zip(*_choices(model, scene_p, scene_f))):
             scene = base + k
             out._choices[scene] = choice
-            solver = model.solver_for(choice.rung, choice.n_segments)
             if hasattr(solver, 'kernel_data'):
                 blocks.setdefault((id(solver), bool(scene_loaded[k])), (solver, []))[1] \
                     .append(scene)

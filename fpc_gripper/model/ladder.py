@@ -181,6 +181,11 @@ class _LadderSolver:
         """Return the flat, unstrained state as engine unknowns."""
         return self._pack(self._flat_state())
 
+    def tip_loads(self, force):
+        """Return the engine loads of a tip force (F_X, F_Z) [N]: none when it is zero."""
+        force = np.asarray(force, dtype=float)
+        return [(self.tip_node, force)] if force.any() else []
+
     def _force(self, loads):
         """Total tip force (F_X, F_Z) [N] of engine loads (these rungs load the tip only)."""
         force = np.zeros(2)
@@ -218,7 +223,7 @@ class _LadderSolver:
             raise ValueError(f'`initial` must be None or a {self._result_type.__name__} of a '
                              'solver with the same discretisation')
         x0 = None if initial is None else self._pack(initial.state)
-        loads = [(self.tip_node, force)] if force.any() else []
+        loads = self.tip_loads(force)
         out = engine.solve(self, pressure, loads, self._options, x0)
         return self._result(out.x, out.status, out.iterations, out.gradient, out.step,
                             out.min_eig, out.fraction, pressure, loads, force)

@@ -235,10 +235,8 @@ class _ArcFeature:
             return abs(float(self.table(pressure)))
         key = (pressure,) + tuple(tip_force)
         if key not in self._loaded:
-            loads = [(self.arc.tip_node, np.asarray(tip_force, dtype=float))] \
-                if any(tip_force) else []
-            out = engine.solve(self.arc, pressure, loads, self.arc._options,
-                               self._nearest(pressure))
+            out = engine.solve(self.arc, pressure, self.arc.tip_loads(tip_force),
+                               self.arc._options, self._nearest(pressure))
             if len(self._loaded) >= _FEATURE_CACHE:
                 self._loaded.clear()
             self._loaded[key] = self._turning(out.x, out.status)
@@ -263,24 +261,24 @@ class _ArcFeature:
 
         """
         out = [None] * len(pressures)
-        todo = {True: [], False: []}
+        index, starts = [], []
         for k, (pressure, force) in enumerate(zip(pressures, tip_forces)):
             if self._tabled(pressure, force):
                 out[k] = abs(float(self.table(pressure)))
-            elif (pressure,) + tuple(force) in self._loaded:
-                out[k] = self._loaded[(pressure,) + tuple(force)]
+                continue
+            start = self._nearest(pressure) if any(force) else None
+            if start is None:
+                # Unloaded beyond the table, or no table state to start from: as `turning`.
+                out[k] = self.turning(pressure, force)
             else:
-                todo[bool(any(force)) and self._nearest(pressure) is not None].append(k)
-        for k in todo[False]:
-            out[k] = self.turning(pressures[k], tip_forces[k])
-        if todo[True]:
-            index = todo[True]
+                index.append(k)
+                starts.append(start)
+        if index:
             batch = engine.solve_batch(
                 [self.arc], np.zeros(len(index), dtype=np.int64),
                 [pressures[k] for k in index], [self.arc.tip_node],
                 np.array([tip_forces[k] for k in index], dtype=float).reshape(-1, 1, 2),
-                self.arc._options, self.arc.tip_node,
-                initial=np.array([self._nearest(pressures[k]) for k in index]))
+                self.arc._options, self.arc.tip_node, initial=np.array(starts))
             for j, k in enumerate(index):
                 out[k] = self._turning(batch.states[j], SolverStatus(int(batch.status[j])))
         return out
