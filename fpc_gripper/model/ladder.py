@@ -13,7 +13,8 @@ from .engine import linear_solve, linear_step, NewtonOptions, SolverStatus
 from .kernels import load_arrays
 from .pcc_kernels import section_arrays
 from .section_law import station_layout
-from .solver import AXES, check_rigidity, PRESSURE_MODELS, rigidity_result
+from .solver import (AXES, check_pressure_model, check_rigidity, pressure_work_factor,
+                     rigidity_result)
 from .validation import real_number, real_pair
 
 __all__ = ['ArcSolver', 'RodSolver', 'LadderResult', 'RodResult', 'ArcResult']
@@ -134,9 +135,7 @@ class RodResult(LadderResult):
 def _check_common(design, pressure_model, samples):
     if not isinstance(design, ActuatorDesign):
         raise TypeError(f'`design` must be an ActuatorDesign, got {type(design).__name__}')
-    if pressure_model not in PRESSURE_MODELS:
-        raise ValueError(f'`pressure_model` must be one of {sorted(PRESSURE_MODELS)}, '
-                         f'got {pressure_model!r}')
+    check_pressure_model(pressure_model)
     if isinstance(samples, bool) or not isinstance(samples, (int, np.integer)) or samples < 3:
         raise ValueError(f'`samples` must be an integer >= 3, got {samples!r}')
 
@@ -145,8 +144,8 @@ def _set_common(solver, design, pressure_model, tol, samples, max_iterations):
     """Check and store the settings every non-CCM rung has."""
     _check_common(design, pressure_model, samples)
     solver.design = design
-    solver.pressure_model = pressure_model
-    solver.pressure_coefficient = PRESSURE_MODELS[pressure_model]
+    solver.pressure_model = check_pressure_model(pressure_model)
+    solver.pressure_coefficient = pressure_work_factor(design, pressure_model)
     solver.tol = float(tol)
     solver.samples = int(samples)
     solver.max_iterations = int(max_iterations)
@@ -270,8 +269,9 @@ class ArcSolver(_LadderSolver):
     ----------
     design : ActuatorDesign
         The finger.
-    pressure_model : {'adiabatic', 'isobaric'}
-        k_p = 1/(gamma - 1) or 1 (SPEC "Pressure work").
+    pressure_model : {None, 'design', 'adiabatic', 'isobaric'}
+        k_p = 1/(gamma - 1) or 1 (SPEC "Pressure work"); None or 'design' (the
+        default): the design's `pressure_work_factor`.
     tol : float
         Largest final Newton step in (eps, kappa L, c1) [-].
     samples : int
@@ -288,7 +288,7 @@ class ArcSolver(_LadderSolver):
     _result_type = ArcResult
     rung = 'arc'
 
-    def __init__(self, design, pressure_model='adiabatic', tol=1e-12, samples=129,
+    def __init__(self, design, pressure_model=None, tol=1e-12, samples=129,
                  max_iterations=60):
         _set_common(self, design, pressure_model, tol, samples, max_iterations)
         self.n_segments = 1
@@ -485,8 +485,9 @@ class RodSolver(_LadderSolver):
     ----------
     design : ActuatorDesign
         The finger.
-    pressure_model : {'adiabatic', 'isobaric'}
-        k_p = 1/(gamma - 1) or 1 (SPEC "Pressure work").
+    pressure_model : {None, 'design', 'adiabatic', 'isobaric'}
+        k_p = 1/(gamma - 1) or 1 (SPEC "Pressure work"); None or 'design' (the
+        default): the design's `pressure_work_factor`.
     tol : float
         Largest final Newton step in theta [rad] and (eps, c1) [-].
     ribs : {'exact', 'average'}
@@ -519,7 +520,7 @@ class RodSolver(_LadderSolver):
     _result_type = RodResult
     rung = 'rod'
 
-    def __init__(self, design, pressure_model='adiabatic', tol=1e-10, ribs='exact', degree=8,
+    def __init__(self, design, pressure_model=None, tol=1e-10, ribs='exact', degree=8,
                  max_element_length=0.010, samples=129, max_iterations=60):
         _check_common(design, pressure_model, samples)
         if isinstance(degree, bool) or not isinstance(degree, (int, np.integer)) \

@@ -157,8 +157,9 @@ class PCCSolver(_LadderSolver):
     n_segments : int
         Number of segments N, raised to the number of constant-section intervals if
         smaller (22 for the paper's finger; see `pcc_edges`).
-    pressure_model : {'adiabatic', 'isobaric'}
-        k_p = 1/(gamma - 1) or 1 (SPEC "Pressure work").
+    pressure_model : {None, 'design', 'adiabatic', 'isobaric'}
+        k_p = 1/(gamma - 1) or 1 (SPEC "Pressure work"); None or 'design' (the
+        default): the design's `pressure_work_factor`.
     tol : float
         Largest final Newton step in theta [rad] and (eps, c1) [-].
     samples : int
@@ -188,7 +189,7 @@ class PCCSolver(_LadderSolver):
     _result_type = PCCResult
     rung = 'pcc'
 
-    def __init__(self, design, n_segments=64, pressure_model='adiabatic', tol=1e-12,
+    def __init__(self, design, n_segments=64, pressure_model=None, tol=1e-12,
                  samples=129, max_iterations=60):
         _check_common(design, pressure_model, samples)
         if isinstance(n_segments, bool) or not isinstance(n_segments, (int, np.integer)) \
