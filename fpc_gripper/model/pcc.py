@@ -317,6 +317,57 @@ class PCCSolver(_LadderSolver):
         return kernels.node_jacobian_kernel(np.ascontiguousarray(x, dtype=float),
                                             self.lengths, int(node))
 
+    def material_jacobian(self, x, s):
+        """
+        Positions of the material points at reference arc lengths s and their derivatives.
+
+        The point at s in segment i, sigma = s - edge_i into it, is
+        O_i + (1 + eps_i) sigma S(rho Delta_i) (cos, sin)(theta_{i-1} + rho Delta_i / 2),
+        rho = sigma / L_i: exactly on the arc (rho = 1 gives the chord, so the node).
+        Written as the sum over every segment k of that partial chord with sigma_k =
+        clip(s - edge_k, 0, L_k), it is differentiated segment by segment.
+
+        Parameters
+        ----------
+        x : ndarray, shape (3 N,)
+            Engine unknowns.
+        s : ndarray, shape (K,)
+            Arc lengths in [0, L] [m].
+
+        Returns
+        -------
+        positions : ndarray, shape (K, 2)
+            [m].
+        jacobian : ndarray, shape (K, 2, 3 N)
+            d position / d x [m per unit strain or radian].
+
+        """
+        state = self._unpack(x)
+        theta, eps = state[:, 0], state[:, 1]
+        before = np.concatenate([[0.0], theta[:-1]])
+        sigma = np.clip(s[:, None] - self.edges[None, :-1], 0.0, self.lengths[None, :])
+        rho = sigma / self.lengths
+        turn = rho * (theta - before)                                    # (K, N)
+        sinc, dsinc = half_angle_sinc(turn, order=1)
+        angle = before + 0.5 * turn
+        along = np.stack([np.cos(angle), np.sin(angle)], axis=1)         # (K, 2, N)
+        normal = np.stack([-along[:, 1], along[:, 0]], axis=1)
+        reach = (1.0 + eps) * sigma                                      # (K, N)
+        chords = (reach * sinc)[:, None, :] * along
+        positions = chords.sum(axis=2)
+        jac = np.zeros((s.size, 2, self.n_segments, 3))
+        jac[..., 0] = (sigma * sinc)[:, None, :] * along
+        arc = (reach * rho * dsinc)[:, None, :] * along
+        bend = (reach * sinc)[:, None, :] * normal
+        jac[..., 2] = arc + (0.5 * rho)[:, None, :] * bend
+        # theta_{i-1} is theta of the segment before (theta_0 = 0 is clamped).
+        jac[..., :-1, 2] += (-arc + (1.0 - 0.5 * rho)[:, None, :] * bend)[..., 1:]
+        return positions, jac.reshape(s.size, 2, -1)
+
+    def material_points(self, result, s):
+        """(X, Z) [m] of the material points at reference arc lengths s (K,) of a result."""
+        return self.material_jacobian(self._pack(result.state), s)[0]
+
     # -- outputs ------------------------------------------------------------
     def _outputs(self, state, pressure, force):
         nodes, points, tangent, strains, beta, coefficients, energy = kernels.outputs_kernel(

@@ -10,9 +10,10 @@ from .analysis import CircleFitted, flexural_rigidity
 from .design import ActuatorDesign
 from .energy import node_jacobian
 from .engine import linear_solve, linear_step, NewtonOptions, SolverStatus
-from .kinematics import from_scaled, midplane_samples, node_positions, to_scaled
+from .kinematics import (from_scaled, material_positions, midplane_samples, node_positions,
+                         to_scaled)
 from .section import build_segments, uniform_edges
-from .validation import real_number, real_pair
+from .validation import arc_lengths, real_number, real_pair
 
 __all__ = ['CCMSolver', 'CCMResult', 'RigidityResult', 'SolverStatus', 'PRESSURE_MODELS',
            'PRESSURE_MODEL_NAMES', 'AXES', 'check_rigidity', 'rigidity_result',
@@ -75,7 +76,42 @@ def pressure_work_factor(design, pressure_model=None):
     return design.pressure_work_factor if name == 'design' else PRESSURE_MODELS[name]
 
 
-class CCMResult(CircleFitted):
+class ResultPositions:
+    """Mixin of a solver result: `position_at`, through the solver's `material_points`."""
+
+    def position_at(self, s):
+        """
+        Midplane position of the material point at reference arc length `s` from the clamp.
+
+        Exact for the result's own kinematics (the CCM's segment polynomials, the arcs of
+        the PCC and the arc rung, the extensible rod's integral of (1 + eps)(cos, sin)
+        theta).
+
+        Parameters
+        ----------
+        s : float or array_like
+            Reference (undeformed) arc length from the clamp edge, in [0, L] [m].
+
+        Returns
+        -------
+        ndarray, shape s.shape + (2,)
+            Global (X, Z) [m].
+
+        Raises
+        ------
+        ValueError, TypeError
+            Where `s` is not a real number in [0, L].
+
+        References
+        ----------
+        docs/physics.md, section 13.
+
+        """
+        values, shape = arc_lengths('s', s, self.solver.design.free_length)
+        return self.solver.material_points(self, values).reshape(shape + (2,))
+
+
+class CCMResult(ResultPositions, CircleFitted):
     """
     Equilibrium of one finger, with OptimizeResult-like fields.
 
@@ -402,6 +438,10 @@ class CCMSolver:
     def node_jacobian(self, q, node):
         """Position of a node [m] and its derivatives in the scaled unknowns, (2, N, 4)."""
         return node_jacobian(q, self.segments.lengths, node)
+
+    def material_points(self, result, s):
+        """(X, Z) [m] of the material points at reference arc lengths s (K,) of a result."""
+        return material_positions(result.q, self.segments.edges, s)
 
     def _initial_state(self, initial):
         """Scaled warm start from a result or an (N, 4) SI array; None for a fresh solve."""
