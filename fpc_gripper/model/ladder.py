@@ -180,6 +180,10 @@ class _LadderSolver:
         """Return the flat, unstrained state as engine unknowns."""
         return self._pack(self._flat_state())
 
+    def unknowns(self, result):
+        """Return the engine unknowns of a result of this solver (for `engine` functions)."""
+        return self._pack(result.state)
+
     def tip_loads(self, force):
         """Return the engine loads of a tip force (F_X, F_Z) [N]: none when it is zero."""
         force = np.asarray(force, dtype=float)

@@ -304,6 +304,33 @@ class PCCSolver(_LadderSolver):
             out.append(solution)
         return np.stack(out, axis=1).reshape(rhs.shape)
 
+    def parameter_gradient(self, x, pressure, loads):
+        """
+        Differentiate the gradient in the engine unknowns by the section law's parameters.
+
+        The parameters are `section_law.SECTION_PARAMETERS`; the derivatives are exact.
+        The loads do not depend on them: only the segments' L_i W(eps_i, Delta_i / L_i,
+        c1_i) terms do, whose gradient is L_i g_eps, L_i g_c1 on (eps_i, c1_i) and
+        +g_kappa, -g_kappa on (theta_i, theta_{i-1}).
+
+        Returns
+        -------
+        ndarray, shape (8, 3 N)
+            [J per unit of each parameter].
+
+        """
+        state = self._unpack(x)
+        theta = state[:, 0]
+        kappa = np.diff(theta, prepend=0.0) / self.lengths
+        y = np.stack([state[:, 1], kappa, state[:, 2]], axis=1)
+        rates = self.law.parameter_gradients(y, pressure, self.segment_types)   # (N, 8, 3)
+        out = np.empty((rates.shape[1], self.n_segments, 3))
+        out[:, :, 0] = (self.lengths[:, None] * rates[:, :, 0]).T
+        out[:, :, 1] = (self.lengths[:, None] * rates[:, :, 2]).T
+        out[:, :, 2] = rates[:, :, 1].T
+        out[:, :-1, 2] -= rates[1:, :, 1].T
+        return out.reshape(rates.shape[1], -1)
+
     def nodes(self, x):
         """Segment ends O_0 = 0 .. O_N = tip [m], (N + 1, 2), at engine unknowns `x`."""
         return kernels.nodes_kernel(np.ascontiguousarray(x, dtype=float), self.lengths)
