@@ -97,15 +97,27 @@ def plot_report(result, path, size=(1500, 1100), dpi=100):
                  fontsize='medium')
     solver = PCCSolver(result.design, result.settings['n_segments']) \
         if result.design is not None else None
-    _plot_shapes(axes[0, 0], result, solver)
-    _plot_curvature(axes[0, 1], result, solver)
-    _plot_rigidity(axes[1, 0], result, solver)
-    _plot_residuals(axes[1, 1], result)
+    frames = _frames(result, solver)
+    _plot_shapes(_axes(axes[0, 0], 'shapes: measured markers and model', 'X [mm]', 'Z [mm]'),
+                 result, frames)
+    _plot_curvature(_axes(axes[0, 1], 'curvature of least-squares circles',
+                          'pressure [kPa]', 'curvature [1/m]'), result, frames)
+    _plot_rigidity(_axes(axes[1, 0], 'flexural rigidity, eq. (22)', 'pressure [kPa]',
+                         'K [N m²]'), result, solver)
+    _plot_residuals(_axes(axes[1, 1], 'residuals / stated noise', 'measurement',
+                          'residual [noise]'), result)
     fig.tight_layout(rect=(0, 0, 1, 0.95))
     path = pathlib.Path(path)
     with atomic_output(path) as tmp:
         fig.savefig(tmp, dpi=dpi, format='png')
     return path
+
+
+def _axes(ax, title, xlabel, ylabel):
+    ax.set_title(title)
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    return ax
 
 
 def _estimate_text(result, name):
@@ -115,36 +127,37 @@ def _estimate_text(result, name):
     return f'{name} {value:.4g} ± {error:.2g}'
 
 
-def _frames(result):
+def _frames(result, solver):
+    """Return (marker rows, modelled result) of every marker frame by pressure; [] if none."""
     markers = result.data.get('markers')
-    if markers is None:
-        return None, []
-    order = np.argsort(markers.pressure, kind='stable')
-    return markers, order
-
-
-def _plot_shapes(ax, result, solver):
-    markers, order = _frames(result)
-    ax.set_title('shapes: measured markers and model')
-    ax.set_xlabel('X [mm]')
-    ax.set_ylabel('Z [mm]')
     if markers is None or solver is None:
-        ax.text(0.5, 0.5, 'no marker data' if markers is None else 'no valid design',
-                ha='center', transform=ax.transAxes)
+        return []
+    seen = _finger_frame(result)
+    out = []
+    for f in np.argsort(markers.pressure, kind='stable'):
+        where = np.flatnonzero(markers.frame == f)
+        where = where[np.argsort(markers.s[where])]
+        model = solver.solve(float(markers.pressure[f]), markers.tip_force[f])
+        out.append((float(markers.pressure[f]), markers.s[where], seen[where],
+                    model if model.success else None))
+    return out
+
+
+def _plot_shapes(ax, result, frames):
+    if not frames:
+        ax.text(0.5, 0.5, 'no marker data' if result.data.get('markers') is None
+                else 'no valid design', ha='center', transform=ax.transAxes)
         return
     import matplotlib
     cmap = matplotlib.colormaps['viridis']
-    top = max(float(markers.pressure.max()), 1.0)
-    seen = _finger_frame(result)
-    for f in order:
-        color = cmap(float(markers.pressure[f]) / top)
-        model = solver.solve(float(markers.pressure[f]), markers.tip_force[f])
-        if model.success:
+    top = max(max(pressure for pressure, *_ in frames), 1.0)
+    for pressure, _, seen, model in frames:
+        color = cmap(pressure / top)
+        if model is not None:
             ax.plot(1e3 * model.points[:, 0], 1e3 * model.points[:, 1], '-', color=color,
                     lw=1.2)
-        where = markers.frame == f
-        ax.plot(1e3 * seen[where, 0], 1e3 * seen[where, 1], 'o', color=color, ms=4,
-                label=f'{markers.pressure[f] / 1e3:.0f} kPa')
+        ax.plot(1e3 * seen[:, 0], 1e3 * seen[:, 1], 'o', color=color, ms=4,
+                label=f'{pressure / 1e3:.0f} kPa')
     ax.set_aspect('equal', adjustable='datalim')
     ax.legend(fontsize='small', ncol=2)
 
@@ -153,23 +166,9 @@ def _circle(points):
     return fit_circle(points).curvature if len(points) >= 3 else math.nan
 
 
-def _plot_curvature(ax, result, solver):
-    markers, order = _frames(result)
-    ax.set_title('curvature of least-squares circles')
-    ax.set_xlabel('pressure [kPa]')
-    ax.set_ylabel('curvature [1/m]')
-    if markers is None or solver is None:
-        return
-    seen = _finger_frame(result)
-    rows = []
-    for f in order:
-        where = np.flatnonzero(markers.frame == f)
-        where = where[np.argsort(markers.s[where])]
-        model = solver.solve(float(markers.pressure[f]), markers.tip_force[f])
-        if not model.success:
-            continue
-        rows.append((markers.pressure[f] / 1e3, _circle(seen[where]),
-                     _circle(model.position_at(markers.s[where])), model.curvature))
+def _plot_curvature(ax, result, frames):
+    rows = [(pressure / 1e3, _circle(seen), _circle(model.position_at(s)), model.curvature)
+            for pressure, s, seen, model in frames if model is not None]
     if rows:
         p, measured, at_markers, whole = np.array(rows).T
         ax.plot(p, measured, 'ko', label='measured markers')
@@ -179,9 +178,6 @@ def _plot_curvature(ax, result, solver):
 
 
 def _plot_rigidity(ax, result, solver):
-    ax.set_title('flexural rigidity, eq. (22)')
-    ax.set_xlabel('pressure [kPa]')
-    ax.set_ylabel('K [N m²]')
     if solver is None:
         return
     loading = result.data.get('loading')
@@ -205,9 +201,6 @@ def _plot_rigidity(ax, result, solver):
 
 
 def _plot_residuals(ax, result):
-    ax.set_title('residuals / stated noise')
-    ax.set_xlabel('measurement')
-    ax.set_ylabel('residual [noise]')
     start = 0
     noise = result.settings['noise']
     for name, values in result.residuals.items():
