@@ -346,7 +346,7 @@ def _covariance(jac, z):
     """
     Covariance of the estimate (in u) of a soft_l1 M-estimator, and the condition number.
 
-    Huber's (1981, eq. 7.10.x; statsmodels' RLM 'H1') asymptotic covariance
+    The asymptotic covariance of Huber (Robust Statistics, 1981; statsmodels' RLM 'H1')
     K^2 [sum psi^2 / (m - n)] / [mean psi']^2 (J^T J)^-1 with psi(z) = z / sqrt(1 + z^2),
     K = 1 + (n / m) var(psi') / mean(psi')^2: the scale comes from the residuals, so a
     misstated noise does not bias the standard errors, and outliers (psi bounded) do not
