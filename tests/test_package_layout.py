@@ -174,4 +174,4 @@ def test_installed_model_node_refuses_a_bad_parameter(prefix):
          '-p', 'pressure_model:=polytropic'],
         env=_installed_env(prefix), capture_output=True, text=True, timeout=60)
     assert process.returncode == 1
-    assert "`pressure_model` must be one of ['adiabatic', 'isobaric']" in process.stderr
+    assert "`pressure_model` must be one of ['design', 'adiabatic', 'isobaric']" in process.stderr

@@ -523,6 +523,7 @@ def build_parser():
     p.add_argument('output', type=pathlib.Path, metavar='OUT', help='output MCAP file')
     p.add_argument('--config', type=pathlib.Path, default=None,
                    help='gripper configuration YAML (default: the package default)')
+    from ..model import PRESSURE_MODEL_NAMES
     from ..model.pipeline import ModelSettings
     from ..nodes.model_core import DEFAULT_STALE_AFTER_S
     defaults = ModelSettings()
@@ -532,7 +533,7 @@ def build_parser():
                         'paper CCM with --segments)')
     p.add_argument('--segments', type=int, default=defaults.n_segments,
                    help=f'CCM segments with --tolerance 0 (default {defaults.n_segments})')
-    p.add_argument('--pressure-model', choices=('adiabatic', 'isobaric'),
+    p.add_argument('--pressure-model', choices=PRESSURE_MODEL_NAMES,
                    default=defaults.pressure_model,
                    help=f'pressure work model (default {defaults.pressure_model})')
     p.add_argument('--stale-after', type=float, default=DEFAULT_STALE_AFTER_S, metavar='S',

@@ -81,11 +81,15 @@ class ActuatorDesign:
         Laminae; the PEMC takes its transverse stiffness Q22 from `emc`.
     max_pressure : float
         Design limit of the gauge pressure [Pa].
+    pressure_work_factor : float
+        k_p > 0 of the pressure potential Pi_P = -k_p P V [-]; default 2.5, the paper's
+        adiabatic 1/(gamma - 1). Solvers use it unless built with an explicit
+        `pressure_model` ('adiabatic': 2.5, 'isobaric': 1).
 
     References
     ----------
     Zhou, Headings, Dapino (2022), Tables II-III; SPEC "Geometry"; docs/physics.md,
-    sections 2 and 3.
+    sections 2, 3 and 6.
 
     """
 
@@ -110,6 +114,7 @@ class ActuatorDesign:
     fluidic_layer: Material = PAPER_MATERIALS['fluidic_layer']
     emc: Material = PAPER_MATERIALS['emc']
     max_pressure: float = 400e3
+    pressure_work_factor: float = 2.5
 
     def __post_init__(self):
         for name in _LENGTHS:
@@ -117,6 +122,8 @@ class ActuatorDesign:
         object.__setattr__(self, 'prestrain', real_number('prestrain', self.prestrain, '[-]'))
         object.__setattr__(self, 'max_pressure',
                            real_number('max_pressure', self.max_pressure, '[Pa]'))
+        object.__setattr__(self, 'pressure_work_factor',
+                           real_number('pressure_work_factor', self.pressure_work_factor, '[-]'))
         coefficients = tuple(self.emc_coefficients) if np.ndim(self.emc_coefficients) else ()
         if len(coefficients) != 4:
             raise ValueError('`emc_coefficients` must be 4 numbers (a1, a2, a3, a4) [Pa], '
@@ -165,6 +172,9 @@ class ActuatorDesign:
             raise ValueError(f'`prestrain` must be in [0, 1) [-], got {self.prestrain}')
         if self.max_pressure <= 0.0:
             raise ValueError(f'`max_pressure` must be > 0 [Pa], got {self.max_pressure}')
+        if self.pressure_work_factor <= 0.0:
+            raise ValueError('`pressure_work_factor` must be > 0 [-], got '
+                             f'{self.pressure_work_factor}')
         check_emc_monotonic(self.emc_coefficients, self.prestrain + _MONOTONIC_MARGIN)
 
     # -- derived geometry -------------------------------------------------

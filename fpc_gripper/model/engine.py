@@ -15,7 +15,7 @@ from . import kernels
 
 __all__ = ['SolverStatus', 'NewtonOptions', 'NewtonOutcome', 'newton', 'solve', 'rigidity',
            'linear_step', 'linear_solve', 'BorderedOutcome', 'solve_batch', 'rigidity_batch',
-           'BatchOutcome']
+           'BatchOutcome', 'sensitivity']
 
 
 class SolverStatus(enum.IntEnum):
@@ -703,6 +703,80 @@ def rigidity(problem, unloaded_x, pressure, node, direction, displacement, optio
     x, force, success, iterations, fraction, stable, gradient = out
     return BorderedOutcome(x, float(force), bool(success), int(iterations), float(fraction),
                            bool(stable), float(gradient))
+
+
+def sensitivity(problem, x, pressure, loads, control=None):
+    """
+    Parameter sensitivities of an equilibrium by the implicit function theorem.
+
+    At an equilibrium g(x; theta) = 0 with a non-singular Hessian H, the state moves
+    with the parameters as dx/dtheta = -H^-1 dg/dtheta; dg/dtheta is the
+    discretisation's ``parameter_gradient(x, pressure, loads)`` (the loads do not depend
+    on theta). Under displacement control (`rigidity`'s bordered system: the gradient
+    g - f grad c with c = e . O_node, and c(x) = target), the force f moves too:
+
+        H dx - f' grad c = -dg/dtheta,    grad c . dx = d target / d theta,
+
+    so with u = H^-1 dg/dtheta and v = H^-1 grad c, f' = (target' + grad c . u) /
+    (grad c . v) and dx = f' v - u. H is the Hessian of the loaded potential there, as
+    the bordered Newton uses it.
+
+    Parameters
+    ----------
+    problem : discretisation
+        As for `rigidity`, with ``parameter_gradient(x, pressure, loads) -> (P,) + x.shape``.
+    x : ndarray
+        The equilibrium [scaled units].
+    pressure : float
+        [Pa].
+    loads : sequence of (int, ndarray (2,))
+        The loads of that equilibrium (under displacement control: the found force at
+        the node, ``[(node, f e)]``).
+    control : (int, ndarray (2,), ndarray (P,)), optional
+        Displacement control: the node, the unit direction e, and d target / d theta
+        (the rate of e . O_node of the unloaded state plus delta) [m per unit].
+
+    Returns
+    -------
+    dx : ndarray, shape (P,) + x.shape
+        d x / d theta [scaled units per unit of each parameter].
+    dforce : ndarray, shape (P,) or None
+        d f / d theta under displacement control [N per unit], None without.
+
+    Raises
+    ------
+    numpy.linalg.LinAlgError
+        Where H (or the bordered system) is singular: the equilibrium does not move
+        smoothly with the parameters.
+
+    References
+    ----------
+    docs/physics.md, section 14.
+
+    """
+    x = np.ascontiguousarray(x, dtype=float)
+    nodes, forces = kernels.load_arrays(loads)
+    _, _, hess = _derivatives(problem, x, pressure, nodes, forces)
+    rates = np.asarray(problem.parameter_gradient(x, pressure, loads), dtype=float)
+    solved = np.empty_like(rates)
+    for k, rate in enumerate(rates):
+        solved[k], ok = _solve_linear(problem, hess, np.ascontiguousarray(rate))
+        if not ok:
+            raise np.linalg.LinAlgError('the Hessian is singular at this equilibrium')
+    if control is None:
+        return -solved, None
+    node, direction, target_rate = control
+    jacobian = _node_jacobian(problem, x, node)[1]
+    grad_c = direction[0] * jacobian[0] + direction[1] * jacobian[1]
+    along, ok = _solve_linear(problem, hess, np.ascontiguousarray(grad_c))
+    denominator = float(np.sum(grad_c * along))
+    if not (ok and np.isfinite(denominator) and denominator != 0.0):
+        raise np.linalg.LinAlgError('the bordered system is singular at this equilibrium')
+    axes = tuple(range(1, solved.ndim))
+    dforce = (np.asarray(target_rate, dtype=float) + np.tensordot(solved, grad_c, axes=(
+        axes, tuple(range(grad_c.ndim))))) / denominator
+    dx = dforce.reshape((-1,) + (1,) * grad_c.ndim) * along - solved
+    return dx, dforce
 
 
 # -- batches -------------------------------------------------------------------------------

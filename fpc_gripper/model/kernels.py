@@ -131,10 +131,12 @@ def segment_energy_kernel(q, stiffness, gas_volume, gas_moments, pemc_basis, pem
         for p in range(points):
             s = _pemc_strain(pemc_basis, i, p, y, prestrain)
             pemc += pemc_weights[i, p] * _horner5(law, 0, s)
-        # Pi_P = -c (1 + C)(V0 + g . y3): the gas volume is bilinear in (y3, C).
+        # Pi_P = -c (1 + C)(V0 + g . y3): the gas volume is bilinear in (y3, C). Grouped as
+        # in `segment_derivatives_kernel`, so that the line search compares equal energies.
         lin_gas = gas_volume[i] + (gas_moments[i, 0] * y[0] + gas_moments[i, 1] * y[1]
                                    + gas_moments[i, 2] * y[2])
-        out[i] = 0.5 * quadratic + pemc - pressure_work * ((1.0 + y[3]) * lin_gas)
+        work = pressure_work * (1.0 + y[3])
+        out[i] = 0.5 * quadratic + pemc - work * lin_gas
     return out
 
 

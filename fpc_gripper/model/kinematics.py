@@ -5,7 +5,7 @@ import numpy as np
 from . import kernels
 
 __all__ = ['to_scaled', 'from_scaled', 'end_rotation', 'node_positions', 'midplane_samples',
-           'consistent_strain_map', 'consistent_from_strain']
+           'material_positions', 'consistent_strain_map', 'consistent_from_strain']
 
 # q = (b1, b3 L^2, c1, d L) is dimensionless; these columns take it to SI and back.
 _B3, _D = 1, 3
@@ -70,18 +70,60 @@ def midplane_samples(q, lengths, per_segment=16):
     """
     nodes, theta, _ = node_positions(q, lengths)
     xi = np.arange(per_segment) / per_segment
-    length = lengths[:, None]
-    u = length * ((1.0 + q[:, :1]) * xi + q[:, 1:2] * xi ** 3)
-    w = length * q[:, 3:4] * xi ** 2
+    x, z = _segment_points(q, lengths, nodes, theta, slice(None), xi[None, :])
     du = (1.0 + q[:, :1]) + 3.0 * q[:, 1:2] * xi ** 2
     dw = 2.0 * q[:, 3:4] * xi
-    c, s = np.cos(theta)[:, None], np.sin(theta)[:, None]
-    x = nodes[:-1, :1] + c * u - s * w
-    z = nodes[:-1, 1:] + s * u + c * w
     ang = theta[:, None] + np.arctan2(dw, du)
     tip_angle = theta[-1] + np.arctan2(2.0 * q[-1, 3], 1.0 + q[-1, 0] + 3.0 * q[-1, 1])
     points = np.concatenate([np.stack([x.ravel(), z.ravel()], axis=1), nodes[-1:]])
     return points, np.concatenate([ang.ravel(), [tip_angle]])
+
+
+def _segment_points(q, lengths, nodes, theta, segment, xi):
+    """
+    Global (X, Z) of the points at xi = x / L_i of segments `segment` (eq. 13, then eq. 15).
+
+    `segment` indexes the segments (an index array, or a slice), and `xi` broadcasts
+    against a column per indexed segment; returns X and Z of that broadcast shape [m].
+    """
+    q = q[segment]
+    length = lengths[segment][:, None]
+    u = length * ((1.0 + q[:, :1]) * xi + q[:, 1:2] * xi ** 3)
+    w = length * q[:, 3:4] * xi ** 2
+    c, s = np.cos(theta[segment])[:, None], np.sin(theta[segment])[:, None]
+    origin = nodes[:-1][segment]
+    return origin[:, :1] + c * u - s * w, origin[:, 1:] + s * u + c * w
+
+
+def material_positions(q, edges, s):
+    """
+    Global (X, Z) of the CCM's material points at reference arc lengths s [m].
+
+    The point at s lies in segment i (edges[i] <= s < edges[i + 1], the last segment
+    for s = L) at x = s - edges[i], and its position is O_i + R(theta_i) (U(x), W(x)) of
+    eqs. (13) and (15): exactly the drawn midplane (`midplane_samples`).
+
+    Parameters
+    ----------
+    q : ndarray, shape (N, 4)
+        Scaled unknowns.
+    edges : ndarray, shape (N + 1,)
+        Segment edges [m].
+    s : ndarray, shape (K,)
+        Arc lengths in [0, L] [m].
+
+    Returns
+    -------
+    ndarray, shape (K, 2)
+        [m].
+
+    """
+    lengths = np.diff(edges)
+    nodes, theta, _ = node_positions(q, lengths)
+    segment = np.clip(np.searchsorted(edges, s, side='right') - 1, 0, lengths.size - 1)
+    xi = ((s - edges[segment]) / lengths[segment])[:, None]
+    x, z = _segment_points(q, lengths, nodes, theta, segment, xi)
+    return np.concatenate([x, z], axis=1)
 
 
 def consistent_strain_map(q):

@@ -11,9 +11,10 @@ from .analysis import CircleFitted
 from .design import ActuatorDesign
 from .engine import linear_solve, linear_step, NewtonOptions, SolverStatus
 from .kernels import load_arrays
-from .pcc_kernels import section_arrays
+from .pcc_kernels import half_angle_sinc_kernel, section_arrays
 from .section_law import station_layout
-from .solver import AXES, check_rigidity, PRESSURE_MODELS, rigidity_result
+from .solver import (AXES, check_pressure_model, check_rigidity, pressure_work_factor,
+                     ResultPositions, rigidity_result)
 from .validation import real_number, real_pair
 
 __all__ = ['ArcSolver', 'RodSolver', 'LadderResult', 'RodResult', 'ArcResult']
@@ -36,7 +37,7 @@ _ARC_X, _ARC_WX = np.polynomial.legendre.leggauss(48)
 _ARC_T, _ARC_W = 0.5 * (_ARC_X + 1.0), 0.5 * _ARC_WX
 
 
-class LadderResult(CircleFitted):
+class LadderResult(ResultPositions, CircleFitted):
     """
     Equilibrium of one finger from a ladder rung, with the fields of `CCMResult`.
 
@@ -134,9 +135,7 @@ class RodResult(LadderResult):
 def _check_common(design, pressure_model, samples):
     if not isinstance(design, ActuatorDesign):
         raise TypeError(f'`design` must be an ActuatorDesign, got {type(design).__name__}')
-    if pressure_model not in PRESSURE_MODELS:
-        raise ValueError(f'`pressure_model` must be one of {sorted(PRESSURE_MODELS)}, '
-                         f'got {pressure_model!r}')
+    check_pressure_model(pressure_model)
     if isinstance(samples, bool) or not isinstance(samples, (int, np.integer)) or samples < 3:
         raise ValueError(f'`samples` must be an integer >= 3, got {samples!r}')
 
@@ -145,8 +144,8 @@ def _set_common(solver, design, pressure_model, tol, samples, max_iterations):
     """Check and store the settings every non-CCM rung has."""
     _check_common(design, pressure_model, samples)
     solver.design = design
-    solver.pressure_model = pressure_model
-    solver.pressure_coefficient = PRESSURE_MODELS[pressure_model]
+    solver.pressure_model = check_pressure_model(pressure_model)
+    solver.pressure_coefficient = pressure_work_factor(design, pressure_model)
     solver.tol = float(tol)
     solver.samples = int(samples)
     solver.max_iterations = int(max_iterations)
@@ -180,6 +179,10 @@ class _LadderSolver:
     def flat(self):
         """Return the flat, unstrained state as engine unknowns."""
         return self._pack(self._flat_state())
+
+    def unknowns(self, result):
+        """Return the engine unknowns of a result of this solver (for `engine` functions)."""
+        return self._pack(result.state)
 
     def tip_loads(self, force):
         """Return the engine loads of a tip force (F_X, F_Z) [N]: none when it is zero."""
@@ -270,8 +273,9 @@ class ArcSolver(_LadderSolver):
     ----------
     design : ActuatorDesign
         The finger.
-    pressure_model : {'adiabatic', 'isobaric'}
-        k_p = 1/(gamma - 1) or 1 (SPEC "Pressure work").
+    pressure_model : {None, 'design', 'adiabatic', 'isobaric'}
+        k_p = 1/(gamma - 1) or 1 (SPEC "Pressure work"); None or 'design' (the
+        default): the design's `pressure_work_factor`.
     tol : float
         Largest final Newton step in (eps, kappa L, c1) [-].
     samples : int
@@ -288,7 +292,7 @@ class ArcSolver(_LadderSolver):
     _result_type = ArcResult
     rung = 'arc'
 
-    def __init__(self, design, pressure_model='adiabatic', tol=1e-12, samples=129,
+    def __init__(self, design, pressure_model=None, tol=1e-12, samples=129,
                  max_iterations=60):
         _set_common(self, design, pressure_model, tol, samples, max_iterations)
         self.n_segments = 1
@@ -348,6 +352,13 @@ class ArcSolver(_LadderSolver):
         force = self._force(loads)
         return (np.array([self.tip_node], dtype=np.int64), force.reshape(1, 2)) \
             if force.any() else load_arrays([])
+
+    def material_points(self, result, s):
+        """(X, Z) [m] of the material points at reference arc lengths s (K,): on the arc."""
+        eps, kappa = result.state[0], result.state[1]
+        turn = np.ascontiguousarray(kappa * s)
+        chord = (1.0 + eps) * s * half_angle_sinc_kernel(turn, 0)[0]
+        return np.stack([chord * np.cos(0.5 * turn), chord * np.sin(0.5 * turn)], axis=1)
 
     def turning(self, y):
         """Return the turning kappa L [rad] of the arc of state y = (eps, kappa, c1)."""
@@ -485,8 +496,9 @@ class RodSolver(_LadderSolver):
     ----------
     design : ActuatorDesign
         The finger.
-    pressure_model : {'adiabatic', 'isobaric'}
-        k_p = 1/(gamma - 1) or 1 (SPEC "Pressure work").
+    pressure_model : {None, 'design', 'adiabatic', 'isobaric'}
+        k_p = 1/(gamma - 1) or 1 (SPEC "Pressure work"); None or 'design' (the
+        default): the design's `pressure_work_factor`.
     tol : float
         Largest final Newton step in theta [rad] and (eps, c1) [-].
     ribs : {'exact', 'average'}
@@ -519,7 +531,7 @@ class RodSolver(_LadderSolver):
     _result_type = RodResult
     rung = 'rod'
 
-    def __init__(self, design, pressure_model='adiabatic', tol=1e-10, ribs='exact', degree=8,
+    def __init__(self, design, pressure_model=None, tol=1e-10, ribs='exact', degree=8,
                  max_element_length=0.010, samples=129, max_iterations=60):
         _check_common(design, pressure_model, samples)
         if isinstance(degree, bool) or not isinstance(degree, (int, np.integer)) \
@@ -571,8 +583,16 @@ class RodSolver(_LadderSolver):
 
     def _sample_geometry(self):
         """Store where the output samples lie; it depends on the edges alone."""
-        # Every sample s_m, and a Gauss rule from its element's start to it, (M, Q + 1).
-        s = np.linspace(0.0, self.length, self.samples)
+        self._sample_at = self._geometry(np.linspace(0.0, self.length, self.samples))
+
+    def _geometry(self, s):
+        """
+        Where points at reference arc lengths s (M,) lie, the last one being the tip.
+
+        Returns (element (M,), Lagrange values and derivatives at every point and at Q
+        Gauss points from its element's start to it (M (Q + 1), p + 1), their element's
+        half length and index, Gauss weights (M, Q) [m]).
+        """
         elem = np.clip(np.searchsorted(self.edges, s, side='right') - 1, 0, self.n_elements - 1)
         lo = self.edges[elem]
         xq = self._xq
@@ -581,13 +601,10 @@ class RodSolver(_LadderSolver):
         el = np.repeat(elem[:, None], allp.shape[1], axis=1)
         xi = 2.0 * (allp - self.edges[el]) / (2.0 * self._half[el]) - 1.0
         values, derivs = _lagrange(self._nodes_ref, xi.ravel())
-        self._sample_element = elem.astype(np.int64)
-        self._sample_values = np.ascontiguousarray(values)
-        self._sample_derivs = np.ascontiguousarray(derivs)
-        self._sample_half = self._half[el.ravel()]
-        self._sample_point_element = el.ravel().astype(np.int64)
-        self._sample_weights = (0.5 * (s - lo)[:, None]
-                                * np.polynomial.legendre.leggauss(xq.size)[1][None, :])
+        weights = 0.5 * (s - lo)[:, None] * np.polynomial.legendre.leggauss(xq.size)[1][None, :]
+        return (elem.astype(np.int64), np.ascontiguousarray(values),
+                np.ascontiguousarray(derivs), self._half[el.ravel()],
+                el.ravel().astype(np.int64), weights)
 
     def _compatible(self, other):
         return (isinstance(other, RodSolver) and other.degree == self.degree
@@ -719,24 +736,46 @@ class RodSolver(_LadderSolver):
                                                 self._basis, self._weights)
 
     # -- outputs ------------------------------------------------------------
+    def _points(self, x, geometry, pressure, force):
+        """
+        Fields and positions of a state at the points of `geometry` (`_geometry`).
+
+        theta and kappa come from the polynomial; eps and c1 from the local equilibrium
+        (started from the element's mean); the position from the element start by the
+        Gauss rule of (1 + eps)(cos, sin) theta. Returns (theta (M, Q + 1), kappa, local
+        (eps, c1) (M, Q + 1, 2), element ends (E + 1, 2), points (M, 2), the last the tip).
+        """
+        element, values, derivs, half, point_element, weights = geometry
+        shape = (element.size, self._xq.size + 1)
+        th_s, kap_s, along, start = rod_kernels.sample_fields_kernel(
+            x, self._xq.size, values, derivs, half, point_element, force)
+        problem = _PointwiseLocal(self, kap_s, along, point_element, pressure)
+        bs = engine.newton(problem, start, pressure, [], self._local_options).x.reshape(
+            shape + (2,))
+        th_s, kap_s = th_s.reshape(shape), kap_s.reshape(shape)
+        nodes, points = rod_kernels.sample_points_kernel(x, bs, th_s, self._basis,
+                                                         self._weights, element, weights)
+        return th_s, kap_s, bs, nodes, points
+
+    def material_points(self, result, s):
+        """
+        (X, Z) [m] of the material points at reference arc lengths s (K,) of a result.
+
+        The start of s's element plus the integral of (1 + eps)(cos, sin) theta from there
+        to s by the elements' Gauss rule (Q points), eps from the local equilibrium at
+        those points: the rod's own kinematics, equal to its nodes at element ends.
+        """
+        # The kernel ends every point set at the tip: the tip closes the query.
+        geometry = self._geometry(np.append(s, self.length))
+        force = np.ascontiguousarray(result.tip_force, dtype=float)
+        points = self._points(self._pack(result.state), geometry, result.pressure, force)[4]
+        return points[:-1]
+
     def _outputs(self, state, pressure, force):
         theta, _ = state
         x = self._pack(state)
         force = np.ascontiguousarray(force, dtype=float)
-        # Samples: theta and kappa from the polynomial; eps, c1 by the local equilibrium
-        # (started from the element's mean); the position by a Gauss rule from the
-        # element start.
-        shape = (self.samples, self._xq.size + 1)
-        th_s, kap_s, along, start = rod_kernels.sample_fields_kernel(
-            x, self._xq.size, self._sample_values, self._sample_derivs, self._sample_half,
-            self._sample_point_element, force)
-        problem = _PointwiseLocal(self, kap_s, along, self._sample_point_element, pressure)
-        bs = engine.newton(problem, start, pressure, [], self._local_options).x.reshape(
-            shape + (2,))
-        th_s, kap_s = th_s.reshape(shape), kap_s.reshape(shape)
-        nodes, points = rod_kernels.sample_points_kernel(
-            x, bs, th_s, self._basis, self._weights, self._sample_element,
-            self._sample_weights)
+        th_s, kap_s, bs, nodes, points = self._points(x, self._sample_at, pressure, force)
         strains = np.stack([bs[:, 0, 0], kap_s[:, 0], bs[:, 0, 1]], axis=1)
         return {
             'points': points, 'tangent': th_s[:, 0], 'strains': strains,

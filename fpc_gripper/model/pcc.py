@@ -157,8 +157,9 @@ class PCCSolver(_LadderSolver):
     n_segments : int
         Number of segments N, raised to the number of constant-section intervals if
         smaller (22 for the paper's finger; see `pcc_edges`).
-    pressure_model : {'adiabatic', 'isobaric'}
-        k_p = 1/(gamma - 1) or 1 (SPEC "Pressure work").
+    pressure_model : {None, 'design', 'adiabatic', 'isobaric'}
+        k_p = 1/(gamma - 1) or 1 (SPEC "Pressure work"); None or 'design' (the
+        default): the design's `pressure_work_factor`.
     tol : float
         Largest final Newton step in theta [rad] and (eps, c1) [-].
     samples : int
@@ -188,7 +189,7 @@ class PCCSolver(_LadderSolver):
     _result_type = PCCResult
     rung = 'pcc'
 
-    def __init__(self, design, n_segments=64, pressure_model='adiabatic', tol=1e-12,
+    def __init__(self, design, n_segments=64, pressure_model=None, tol=1e-12,
                  samples=129, max_iterations=60):
         _check_common(design, pressure_model, samples)
         if isinstance(n_segments, bool) or not isinstance(n_segments, (int, np.integer)) \
@@ -303,6 +304,33 @@ class PCCSolver(_LadderSolver):
             out.append(solution)
         return np.stack(out, axis=1).reshape(rhs.shape)
 
+    def parameter_gradient(self, x, pressure, loads):
+        """
+        Differentiate the gradient in the engine unknowns by the section law's parameters.
+
+        The parameters are `section_law.SECTION_PARAMETERS`; the derivatives are exact.
+        The loads do not depend on them: only the segments' L_i W(eps_i, Delta_i / L_i,
+        c1_i) terms do, whose gradient is L_i g_eps, L_i g_c1 on (eps_i, c1_i) and
+        +g_kappa, -g_kappa on (theta_i, theta_{i-1}).
+
+        Returns
+        -------
+        ndarray, shape (8, 3 N)
+            [J per unit of each parameter].
+
+        """
+        state = self._unpack(x)
+        theta = state[:, 0]
+        kappa = np.diff(theta, prepend=0.0) / self.lengths
+        y = np.stack([state[:, 1], kappa, state[:, 2]], axis=1)
+        rates = self.law.parameter_gradients(y, pressure, self.segment_types)   # (N, 8, 3)
+        out = np.empty((rates.shape[1], self.n_segments, 3))
+        out[:, :, 0] = (self.lengths[:, None] * rates[:, :, 0]).T
+        out[:, :, 1] = (self.lengths[:, None] * rates[:, :, 2]).T
+        out[:, :, 2] = rates[:, :, 1].T
+        out[:, :-1, 2] -= rates[1:, :, 1].T
+        return out.reshape(rates.shape[1], -1)
+
     def nodes(self, x):
         """Segment ends O_0 = 0 .. O_N = tip [m], (N + 1, 2), at engine unknowns `x`."""
         return kernels.nodes_kernel(np.ascontiguousarray(x, dtype=float), self.lengths)
@@ -315,6 +343,57 @@ class PCCSolver(_LadderSolver):
             raise ValueError(f'`node` must be an integer in [0, {n}], got {node!r}')
         return kernels.node_jacobian_kernel(np.ascontiguousarray(x, dtype=float),
                                             self.lengths, int(node))
+
+    def material_jacobian(self, x, s):
+        """
+        Positions of the material points at reference arc lengths s and their derivatives.
+
+        The point at s in segment i, sigma = s - edge_i into it, is
+        O_i + (1 + eps_i) sigma S(rho Delta_i) (cos, sin)(theta_{i-1} + rho Delta_i / 2),
+        rho = sigma / L_i: exactly on the arc (rho = 1 gives the chord, so the node).
+        Written as the sum over every segment k of that partial chord with sigma_k =
+        clip(s - edge_k, 0, L_k), it is differentiated segment by segment.
+
+        Parameters
+        ----------
+        x : ndarray, shape (3 N,)
+            Engine unknowns.
+        s : ndarray, shape (K,)
+            Arc lengths in [0, L] [m].
+
+        Returns
+        -------
+        positions : ndarray, shape (K, 2)
+            [m].
+        jacobian : ndarray, shape (K, 2, 3 N)
+            d position / d x [m per unit strain or radian].
+
+        """
+        state = self._unpack(x)
+        theta, eps = state[:, 0], state[:, 1]
+        before = np.concatenate([[0.0], theta[:-1]])
+        sigma = np.clip(s[:, None] - self.edges[None, :-1], 0.0, self.lengths[None, :])
+        rho = sigma / self.lengths
+        turn = rho * (theta - before)                                    # (K, N)
+        sinc, dsinc = half_angle_sinc(turn, order=1)
+        angle = before + 0.5 * turn
+        along = np.stack([np.cos(angle), np.sin(angle)], axis=1)         # (K, 2, N)
+        normal = np.stack([-along[:, 1], along[:, 0]], axis=1)
+        reach = (1.0 + eps) * sigma                                      # (K, N)
+        chords = (reach * sinc)[:, None, :] * along
+        positions = chords.sum(axis=2)
+        jac = np.zeros((s.size, 2, self.n_segments, 3))
+        jac[..., 0] = (sigma * sinc)[:, None, :] * along
+        arc = (reach * rho * dsinc)[:, None, :] * along
+        bend = (reach * sinc)[:, None, :] * normal
+        jac[..., 2] = arc + (0.5 * rho)[:, None, :] * bend
+        # theta_{i-1} is theta of the segment before (theta_0 = 0 is clamped).
+        jac[..., :-1, 2] += (-arc + (1.0 - 0.5 * rho)[:, None, :] * bend)[..., 1:]
+        return positions, jac.reshape(s.size, 2, -1)
+
+    def material_points(self, result, s):
+        """(X, Z) [m] of the material points at reference arc lengths s (K,) of a result."""
+        return self.material_jacobian(self._pack(result.state), s)[0]
 
     # -- outputs ------------------------------------------------------------
     def _outputs(self, state, pressure, force):

@@ -8,7 +8,7 @@ import numpy as np
 
 from .design import ActuatorDesign
 from .selection import AdaptiveSolver
-from .solver import CCMSolver, PRESSURE_MODELS
+from .solver import CCMSolver, check_pressure_model
 
 __all__ = ['DEFAULT_TOLERANCE', 'DEFAULT_N_SEGMENTS', 'MAX_SEGMENTS', 'ModelSettings',
            'finger_model', 'model_label', 'rung_label', 'solver_label']
@@ -34,14 +34,15 @@ class ModelSettings:
         with `n_segments` segments.
     n_segments : int
         Segments of the fixed paper CCM (used when `tolerance` is 0), 1 to 64.
-    pressure_model : {'adiabatic', 'isobaric'}
-        Pressure work model.
+    pressure_model : {'design', 'adiabatic', 'isobaric'}
+        Pressure work: 'design' (or None; the default) uses the design's
+        `pressure_work_factor`, the others fix k_p (2.5, 1).
 
     """
 
     tolerance: float = DEFAULT_TOLERANCE
     n_segments: int = DEFAULT_N_SEGMENTS
-    pressure_model: str = 'adiabatic'
+    pressure_model: str = 'design'
 
     def __post_init__(self):
         tolerance = self.tolerance
@@ -57,9 +58,7 @@ class ModelSettings:
             raise ValueError(f'`n_segments` must be an integer in [1, {MAX_SEGMENTS}], '
                              f'got {n!r}')
         object.__setattr__(self, 'n_segments', int(n))
-        if self.pressure_model not in PRESSURE_MODELS:
-            raise ValueError(f'`pressure_model` must be one of {sorted(PRESSURE_MODELS)}, '
-                             f'got {self.pressure_model!r}')
+        object.__setattr__(self, 'pressure_model', check_pressure_model(self.pressure_model))
 
 
 @functools.lru_cache(maxsize=32)

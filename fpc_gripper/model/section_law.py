@@ -6,10 +6,18 @@ import numpy as np
 
 from . import engine
 from .engine import NewtonOptions, SolverStatus
-from .materials import emc_energy_density, emc_stress, emc_stress_derivative
+from .materials import emc_energy_density, emc_stress, emc_stress_derivative, Material
 
 __all__ = ['SectionLaw', 'build_section_law', 'rib_coverage', 'station_layout',
-           'section_minimiser']
+           'section_minimiser', 'SECTION_PARAMETERS', 'MODULUS_LAMINAE']
+
+#: Laminae whose Young's modulus E1 the section law is linear in (E2 / E1 and nu held):
+#: the constraining and the fluidic layer.
+MODULUS_LAMINAE = ('constraining_layer', 'fluidic_layer')
+#: Parameters of `SectionLaw.parameter_gradients`, in order: the PEMC prestrain, its stress
+#: law a1..a4, k_p, and E1 of each of `MODULUS_LAMINAE`.
+SECTION_PARAMETERS = ('prestrain', 'emc_a1', 'emc_a2', 'emc_a3', 'emc_a4',
+                      'pressure_work_factor', 'cl_modulus', 'fl_modulus')
 
 # 3-point Gauss-Legendre in z is exact for the quintic PEMC energy density (SPEC "Energy").
 _GL_Z = np.polynomial.legendre.leggauss(3)
@@ -49,6 +57,8 @@ class SectionLaw:
         PEMC stress law (a1..a4) [Pa].
     labels : tuple of str
         A name for every section type.
+    modulus_directions : ndarray, shape (2, S, 3, 3), optional
+        dK/dE1 of each of `MODULUS_LAMINAE` (K is linear in them) [m^2, m^3, m^4].
 
     References
     ----------
@@ -64,6 +74,7 @@ class SectionLaw:
     prestrain: float
     emc: tuple
     labels: tuple
+    modulus_directions: np.ndarray = None
 
     @property
     def n_types(self):
@@ -85,10 +96,12 @@ class SectionLaw:
         """
         w = np.asarray(weights, dtype=float)
         w = w / w.sum()
+        directions = None if self.modulus_directions is None else \
+            np.einsum('s,lsij->lij', w, self.modulus_directions)[:, None]
         return SectionLaw(stiffness=np.einsum('s,sij->ij', w, self.stiffness)[None],
                           gas=(w @ self.gas)[None], pemc_z=self.pemc_z,
                           pemc_weights=self.pemc_weights, prestrain=self.prestrain,
-                          emc=self.emc, labels=('mean',))
+                          emc=self.emc, labels=('mean',), modulus_directions=directions)
 
     def _pemc_strain(self, y):
         """PEMC mechanical strain eps0 + eps - z_j kappa at the Gauss points, (..., 3)."""
@@ -165,6 +178,58 @@ class SectionLaw:
         hess[..., 2, 1] += pressure_work * g1
         return energy, grad, hess
 
+    def parameter_gradients(self, y, pressure, types=0):
+        """
+        Differentiate the gradient of W in y with respect to `SECTION_PARAMETERS`, exactly.
+
+        W is linear in a1..a4, k_p and the moduli (through K), so these are exact
+        partial gradients; the prestrain enters the PEMC strain only, where d/deps0 is
+        d/deps of the PEMC term.
+
+        Parameters
+        ----------
+        y : array_like, shape (..., 3)
+            (eps [-], kappa [1/m], c1 [-]).
+        pressure : float
+            Gauge pressure P [Pa] (k_p multiplies it).
+        types : int or array_like of int
+            Section type of every point.
+
+        Returns
+        -------
+        ndarray, shape (..., 8, 3)
+            d(dW/deps, dW/dkappa, dW/dc1) / d(parameter), parameters in the order of
+            `SECTION_PARAMETERS` [per unit of each parameter].
+
+        References
+        ----------
+        docs/physics.md, section 14.
+
+        """
+        y = np.asarray(y, dtype=float)
+        types = np.broadcast_to(types, y.shape[:-1])
+        g = self.gas[types]
+        out = np.zeros(y.shape[:-1] + (len(SECTION_PARAMETERS), 3))
+        s = self._pemc_strain(y)
+        wz = self.pemc_weights
+        zw = self.pemc_z * wz
+        tangent = emc_stress_derivative(self.emc, s)
+        out[..., 0, 0] = tangent @ wz
+        out[..., 0, 1] = -(tangent @ zw)
+        # sigma = a1 s^4 + a2 s^3 + a3 s^2 + a4 s: d sigma/d a_k = s^(5 - k).
+        for k in range(4):
+            power = s ** (4 - k)
+            out[..., 1 + k, 0] = power @ wz
+            out[..., 1 + k, 1] = -(power @ zw)
+        c1 = y[..., 2]
+        out[..., 5, 0] = -pressure * (1.0 + c1) * g[..., 0]
+        out[..., 5, 1] = pressure * (1.0 + c1) * g[..., 1]
+        out[..., 5, 2] = -pressure * (g[..., 0] * (1.0 + y[..., 0]) - g[..., 1] * y[..., 1])
+        if self.modulus_directions is None:
+            raise ValueError('this SectionLaw has no `modulus_directions`')
+        out[..., 6:, :] = np.einsum('l...ij,...j->...li', self.modulus_directions[:, types], y)
+        return out
+
 
 def _box_moments(z0, z1, width):
     """Return width * int z^k dz over [z0, z1] for k = 0, 1, 2 [m^(k+2)]."""
@@ -184,6 +249,11 @@ def _add_linear(k, moments, material, sign):
     k[1, 2] -= q12 * m1
     k[2, 1] -= q12 * m1
     k[2, 2] += q22 * m0
+
+
+def _unit_modulus(material):
+    """Return the lamina with E1 = 1 Pa (E2 / E1 and nu kept): its Q are dQ/dE1."""
+    return Material(1.0, material.E2 / material.E1, material.nu)
 
 
 def rib_coverage(design):
@@ -227,8 +297,15 @@ def build_section_law(design, channel_rib_fractions=(None,), solid=True):
     _add_linear(base, _box_moments(design.h2, design.h1, design.Ly), emc, 1.0)
     _add_linear(base, _box_moments(-design.h3, design.h2, design.Ly), fl, 1.0)
     base[2, 2] += emc.Q22 * design.Ly * (design.H / 2 - design.h3)
+    # dK/dE1 of the CL and the FL: the same boxes with materials of unit E1.
+    unit_cl, unit_fl = (_unit_modulus(getattr(design, name)) for name in MODULUS_LAMINAE)
+    base_directions = np.zeros((2, 3, 3))
+    _add_linear(base_directions[0], _box_moments(design.h1, design.H / 2, design.Ly), unit_cl,
+                1.0)
+    _add_linear(base_directions[1], _box_moments(-design.h3, design.h2, design.Ly), unit_fl,
+                1.0)
     channel = (-design.h3b, design.h3a)
-    stiffness, gas, labels = [], [], []
+    stiffness, gas, labels, directions = [], [], [], []
     for fraction in channel_rib_fractions:
         rho = rib_coverage(design) if fraction is None else float(fraction)
         if not 0.0 <= rho <= 1.0:
@@ -244,10 +321,14 @@ def build_section_law(design, channel_rib_fractions=(None,), solid=True):
         moments = _box_moments(*channel, width)
         _add_linear(k, moments, fl, -1.0)
         stiffness.append(k)
+        direction = base_directions.copy()
+        _add_linear(direction[1], moments, unit_fl, -1.0)
+        directions.append(direction)
         gas.append(moments[:2])
         labels.append(f'channel (rib fraction {rho:.4g})')
     if solid:
         stiffness.append(base.copy())
+        directions.append(base_directions.copy())
         gas.append(np.zeros(2))
         labels.append('solid')
     zp0, zp1 = -design.H / 2, -design.h3
@@ -255,7 +336,8 @@ def build_section_law(design, channel_rib_fractions=(None,), solid=True):
     w = 0.5 * (zp1 - zp0) * _GL_Z[1] * design.Ly
     return SectionLaw(stiffness=np.array(stiffness), gas=np.array(gas), pemc_z=z,
                       pemc_weights=w, prestrain=design.prestrain,
-                      emc=tuple(design.emc_coefficients), labels=tuple(labels))
+                      emc=tuple(design.emc_coefficients), labels=tuple(labels),
+                      modulus_directions=np.stack(directions, axis=1))
 
 
 def station_layout(design, ribs='exact'):

@@ -16,7 +16,7 @@ from .ladder import ArcSolver, RodSolver
 from .pcc import PCCSolver
 from .section import uniform_edges
 from .section_law import station_layout
-from .solver import CCMSolver, PRESSURE_MODELS, SolverStatus
+from .solver import CCMSolver, check_pressure_model, SolverStatus
 from .validation import real_number, real_pair
 
 __all__ = ['Scene', 'ModelChoice', 'RUNGS', 'choose_model', 'load_error_model', 'make_solver',
@@ -43,14 +43,15 @@ class Scene:
         Gauge pressure [Pa].
     tip_force : (float, float)
         (f0, p0) along global X and Z [N].
-    pressure_model : {'adiabatic', 'isobaric'}
+    pressure_model : {'design', 'adiabatic', 'isobaric'}
+        'design' (or None, the default): the design's `pressure_work_factor`.
 
     """
 
     design: ActuatorDesign
     pressure: float = 0.0
     tip_force: tuple = (0.0, 0.0)
-    pressure_model: str = 'adiabatic'
+    pressure_model: str = 'design'
 
     def __post_init__(self):
         if not isinstance(self.design, ActuatorDesign):
@@ -61,9 +62,7 @@ class Scene:
             raise ValueError(f'`pressure` must be >= 0 (gauge) [Pa], got {pressure}')
         object.__setattr__(self, 'pressure', pressure)
         object.__setattr__(self, 'tip_force', real_pair('tip_force', self.tip_force, '[N]'))
-        if self.pressure_model not in PRESSURE_MODELS:
-            raise ValueError(f'`pressure_model` must be one of {sorted(PRESSURE_MODELS)}, '
-                             f'got {self.pressure_model!r}')
+        object.__setattr__(self, 'pressure_model', check_pressure_model(self.pressure_model))
 
     @property
     def load(self):
@@ -98,12 +97,12 @@ class ModelChoice:
     reason: str
     cost: float = float('nan')
 
-    def make_solver(self, design, pressure_model='adiabatic'):
+    def make_solver(self, design, pressure_model=None):
         """Build the solver of this choice for a design."""
         return make_solver(self.rung, self.n_segments, design, pressure_model)
 
 
-def make_solver(rung, n_segments, design, pressure_model='adiabatic'):
+def make_solver(rung, n_segments, design, pressure_model=None):
     """
     Build the solver of a rung.
 
@@ -114,7 +113,8 @@ def make_solver(rung, n_segments, design, pressure_model='adiabatic'):
     n_segments : int
         Segments of the CCM and PCC rungs (ignored by the arc and the rod).
     design : ActuatorDesign
-    pressure_model : {'adiabatic', 'isobaric'}
+    pressure_model : {None, 'design', 'adiabatic', 'isobaric'}
+        None or 'design': the design's `pressure_work_factor`.
 
     """
     if rung == 'arc':
@@ -459,7 +459,8 @@ class AdaptiveSolver:
     design : ActuatorDesign
     tolerance : float
         Tip-position tolerance against the geometrically exact rod [m], > 0.
-    pressure_model : {'adiabatic', 'isobaric'}
+    pressure_model : {None, 'design', 'adiabatic', 'isobaric'}
+        None or 'design' (the default): the design's `pressure_work_factor`.
     max_segments : int
         Largest N that refinement may reach.
     error_model : dict, optional
@@ -467,18 +468,15 @@ class AdaptiveSolver:
 
     """
 
-    def __init__(self, design, tolerance=0.5e-3, pressure_model='adiabatic', max_segments=128,
+    def __init__(self, design, tolerance=0.5e-3, pressure_model=None, max_segments=128,
                  error_model=None):
         if not isinstance(design, ActuatorDesign):
             raise TypeError(f'`design` must be an ActuatorDesign, got {type(design).__name__}')
         self.tolerance = real_number('tolerance', tolerance, '[m]')
         if self.tolerance <= 0.0:
             raise ValueError(f'`tolerance` must be > 0 [m], got {self.tolerance}')
-        if pressure_model not in PRESSURE_MODELS:
-            raise ValueError(f'`pressure_model` must be one of {sorted(PRESSURE_MODELS)}, '
-                             f'got {pressure_model!r}')
         self.design = design
-        self.pressure_model = pressure_model
+        self.pressure_model = check_pressure_model(pressure_model)
         self.max_segments = int(max_segments)
         self._model = load_error_model() if error_model is None else error_model
         # Built here so that the first solve does not pay for the unloaded feature table.

@@ -10,15 +10,21 @@ from .analysis import CircleFitted, flexural_rigidity
 from .design import ActuatorDesign
 from .energy import node_jacobian
 from .engine import linear_solve, linear_step, NewtonOptions, SolverStatus
-from .kinematics import from_scaled, midplane_samples, node_positions, to_scaled
+from .kinematics import (from_scaled, material_positions, midplane_samples, node_positions,
+                         to_scaled)
 from .section import build_segments, uniform_edges
-from .validation import real_number, real_pair
+from .validation import arc_lengths, real_number, real_pair
 
 __all__ = ['CCMSolver', 'CCMResult', 'RigidityResult', 'SolverStatus', 'PRESSURE_MODELS',
-           'AXES', 'check_rigidity', 'rigidity_result']
+           'PRESSURE_MODEL_NAMES', 'AXES', 'check_rigidity', 'rigidity_result',
+           'check_pressure_model', 'pressure_work_factor']
 
-#: Pressure-work coefficient k_p of Pi_P = -k_p P V (SPEC "Pressure work"); gamma = 1.4.
-PRESSURE_MODELS = {'adiabatic': 1.0 / (1.4 - 1.0), 'isobaric': 1.0}
+#: Pressure-work coefficient k_p of Pi_P = -k_p P V by name (SPEC "Pressure work"):
+#: 1/(gamma - 1) with gamma = 1.4, exactly 2.5 (1/(1.4 - 1) rounds to 2.5000000000000004).
+PRESSURE_MODELS = {'adiabatic': 2.5, 'isobaric': 1.0}
+#: Every `pressure_model` a solver takes: 'design' (the design's `pressure_work_factor`,
+#: also spelt None) or a name of `PRESSURE_MODELS`.
+PRESSURE_MODEL_NAMES = ('design',) + tuple(PRESSURE_MODELS)
 #: Midplane reconstructions: the paper's, or one that converges to the rod as N grows
 #: (kinematics.consistent_strain_map).
 RECONSTRUCTIONS = ('paper', 'consistent')
@@ -42,7 +48,70 @@ _MESSAGES = {
 }
 
 
-class CCMResult(CircleFitted):
+def check_pressure_model(pressure_model):
+    """
+    Return the name of a pressure model, 'design' for None; raise naming the argument.
+
+    Parameters
+    ----------
+    pressure_model : {None, 'design', 'adiabatic', 'isobaric'}
+        None and 'design' use the design's `pressure_work_factor`; the names fix k_p.
+
+    """
+    name = 'design' if pressure_model is None else pressure_model
+    if not isinstance(name, str) or name not in PRESSURE_MODEL_NAMES:
+        raise ValueError(f'`pressure_model` must be one of {list(PRESSURE_MODEL_NAMES)}, '
+                         f'got {pressure_model!r}')
+    return name
+
+
+def pressure_work_factor(design, pressure_model=None):
+    """
+    Return k_p of Pi_P = -k_p P V for a design and a solver's pressure model [-].
+
+    A solver built with an explicit pressure model uses that model's k_p; without one
+    (None or 'design') it uses the design's `pressure_work_factor` (SPEC "Pressure work").
+    """
+    name = check_pressure_model(pressure_model)
+    return design.pressure_work_factor if name == 'design' else PRESSURE_MODELS[name]
+
+
+class ResultPositions:
+    """Mixin of a solver result: `position_at`, through the solver's `material_points`."""
+
+    def position_at(self, s):
+        """
+        Midplane position of the material point at reference arc length `s` from the clamp.
+
+        Exact for the result's own kinematics (the CCM's segment polynomials, the arcs of
+        the PCC and the arc rung, the extensible rod's integral of (1 + eps)(cos, sin)
+        theta).
+
+        Parameters
+        ----------
+        s : float or array_like
+            Reference (undeformed) arc length from the clamp edge, in [0, L] [m].
+
+        Returns
+        -------
+        ndarray, shape s.shape + (2,)
+            Global (X, Z) [m].
+
+        Raises
+        ------
+        ValueError, TypeError
+            Where `s` is not a real number in [0, L].
+
+        References
+        ----------
+        docs/physics.md, section 13.
+
+        """
+        values, shape = arc_lengths('s', s, self.solver.design.free_length)
+        return self.solver.material_points(self, values).reshape(shape + (2,))
+
+
+class CCMResult(ResultPositions, CircleFitted):
     """
     Equilibrium of one finger, with OptimizeResult-like fields.
 
@@ -234,8 +303,9 @@ class CCMSolver:
         The finger.
     n_segments : int
         Number N of segments of equal length (split at load points if any).
-    pressure_model : {'adiabatic', 'isobaric'}
-        k_p = 1/(gamma - 1) (the paper's eq. 20) or 1 (a regulated source).
+    pressure_model : {None, 'design', 'adiabatic', 'isobaric'}
+        k_p = 1/(gamma - 1) (the paper's eq. 20) or 1 (a regulated source); None or
+        'design' (the default): the design's `pressure_work_factor`.
     segment_edges : array_like, optional
         Explicit edges from 0 to the free length [m]; overrides `n_segments`.
     load_points : sequence of float
@@ -261,14 +331,12 @@ class CCMSolver:
 
     """
 
-    def __init__(self, design, n_segments=8, pressure_model='adiabatic', segment_edges=None,
+    def __init__(self, design, n_segments=8, pressure_model=None, segment_edges=None,
                  load_points=(), samples_per_segment=16, max_iterations=60, gtol=1e-10,
                  xtol=1e-9, reconstruction='paper'):
         if not isinstance(design, ActuatorDesign):
             raise TypeError(f'`design` must be an ActuatorDesign, got {type(design).__name__}')
-        if pressure_model not in PRESSURE_MODELS:
-            raise ValueError(f'`pressure_model` must be one of {sorted(PRESSURE_MODELS)}, '
-                             f'got {pressure_model!r}')
+        pressure_model = check_pressure_model(pressure_model)
         if isinstance(n_segments, bool) or not isinstance(n_segments, (int, np.integer)) \
                 or n_segments < 1:
             raise ValueError(f'`n_segments` must be an integer >= 1, got {n_segments!r}')
@@ -284,7 +352,7 @@ class CCMSolver:
         self.rung = 'ccm' if reconstruction == 'paper' else 'ccm_consistent'
         self.design = design
         self.pressure_model = pressure_model
-        self.pressure_coefficient = PRESSURE_MODELS[pressure_model]
+        self.pressure_coefficient = pressure_work_factor(design, pressure_model)
         length = design.free_length
         self.load_points = tuple(real_number('load_points', s, '[m]') for s in load_points)
         for s in self.load_points:
@@ -370,6 +438,10 @@ class CCMSolver:
     def node_jacobian(self, q, node):
         """Position of a node [m] and its derivatives in the scaled unknowns, (2, N, 4)."""
         return node_jacobian(q, self.segments.lengths, node)
+
+    def material_points(self, result, s):
+        """(X, Z) [m] of the material points at reference arc lengths s (K,) of a result."""
+        return material_positions(result.q, self.segments.edges, s)
 
     def _initial_state(self, initial):
         """Scaled warm start from a result or an (N, 4) SI array; None for a fresh solve."""

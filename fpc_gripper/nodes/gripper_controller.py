@@ -52,7 +52,7 @@ from fpc_gripper.control.geometry import PalmGeometry
 from fpc_gripper.control.inverse import InverseModel
 from fpc_gripper.io.config import default_gripper_config_path
 from fpc_gripper.io.config import load_gripper_config
-from fpc_gripper.model import PRESSURE_MODELS
+from fpc_gripper.model import PRESSURE_MODEL_NAMES
 from fpc_gripper.model.pipeline import MAX_SEGMENTS
 from fpc_gripper.model.pipeline import ModelSettings
 from fpc_gripper.nodes.parameters import declare_table
@@ -86,8 +86,9 @@ def _parameter_table(config_max_pressure):
         ('n_segments', model.n_segments, 'CCM segments of the finger model when tolerance '
          'is 0.', {'read_only': True, 'integer_range': int_range(1, MAX_SEGMENTS)}),
         ('pressure_model', model.pressure_model,
-         f'Pressure work model, one of {list(PRESSURE_MODELS)}.',
-         {'read_only': True, 'additional_constraints': f'one of {list(PRESSURE_MODELS)}'}),
+         f"Pressure work model, one of {list(PRESSURE_MODEL_NAMES)} ('design': each finger "
+         "design's pressure_work_factor).",
+         {'read_only': True, 'additional_constraints': f'one of {list(PRESSURE_MODEL_NAMES)}'}),
         ('max_pressure', config_max_pressure,
          'Largest command [Pa gauge]; at most the gripper config max_pressure.',
          {'floating_point_range': float_range(0.0, config_max_pressure)}),

@@ -38,7 +38,7 @@ from fpc_gripper.io.messages import serialized_shape
 from fpc_gripper.io.messages import shape_marker
 from fpc_gripper.io.messages import shape_message
 from fpc_gripper.io.messages import time_to_ns
-from fpc_gripper.model import PRESSURE_MODELS
+from fpc_gripper.model import PRESSURE_MODEL_NAMES
 from fpc_gripper.model.pipeline import finger_model
 from fpc_gripper.model.pipeline import MAX_SEGMENTS
 from fpc_gripper.model.pipeline import ModelSettings
@@ -52,7 +52,7 @@ from fpc_gripper.nodes.parameters import int_range
 PRESSURE_INPUTS = ('command', 'measured')
 # The model settings every consumer of the finger pipeline defaults to.
 _DEFAULTS = ModelSettings()
-_CHOICES = {'pressure_model': tuple(PRESSURE_MODELS), 'pressure_input': PRESSURE_INPUTS}
+_CHOICES = {'pressure_model': PRESSURE_MODEL_NAMES, 'pressure_input': PRESSURE_INPUTS}
 # Parameters whose change rebuilds the solvers.
 _SOLVER_PARAMETERS = ('n_segments', 'pressure_model', 'tolerance')
 
@@ -107,9 +107,10 @@ def _parameter_table():
          'tolerance is 0; a change rebuilds the solvers.',
          {'integer_range': int_range(1, MAX_SEGMENTS)}),
         ('pressure_model', _DEFAULTS.pressure_model,
-         "Pressure work: 'adiabatic' (k_p = 1/(gamma - 1), paper eq. 20) or 'isobaric' "
-         '(k_p = 1); a change rebuilds the solvers.',
-         {'additional_constraints': f'one of {list(PRESSURE_MODELS)}'}),
+         "Pressure work: 'design' (each finger design's pressure_work_factor k_p), "
+         "'adiabatic' (k_p = 1/(gamma - 1) = 2.5, paper eq. 20) or 'isobaric' (k_p = 1); a "
+         'change rebuilds the solvers.',
+         {'additional_constraints': f'one of {list(PRESSURE_MODEL_NAMES)}'}),
         ('max_rate_hz', 200.0,
          'Solve-rate cap per finger [Hz]; newer input replaces pending input (latest wins).',
          {'floating_point_range': float_range(1.0, 10000.0)}),

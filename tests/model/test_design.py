@@ -47,6 +47,8 @@ def test_replace_returns_new_validated_design():
     ({'H': float('nan')}, '`H` must be finite'),
     ({'emc_coefficients': (1e6, 0, 0, -1e5)}, 'increases on'),
     ({'emc_coefficients': (1.0, 2.0)}, '4 numbers'),
+    ({'pressure_work_factor': 0.0}, '`pressure_work_factor` must be > 0'),
+    ({'pressure_work_factor': float('inf')}, '`pressure_work_factor` must be finite'),
 ])
 def test_invalid_designs_name_the_problem(fields, message):
     with pytest.raises(ValueError, match=message):
@@ -68,7 +70,7 @@ def test_material_validation():
 def test_yaml_round_trip_is_exact(tmp_path):
     d = ActuatorDesign.paper(prestrain=0.37).replace(
         Cy=0.0271, fluidic_layer=Material(1.3e6, 1.3e6, 0.49), ribs=False,
-        emc_coefficients=(-1.0e6, 2.1e6, -1.9e6, 1.5e6))
+        emc_coefficients=(-1.0e6, 2.1e6, -1.9e6, 1.5e6), pressure_work_factor=1.7)
     path = tmp_path / 'd.yaml'
     d.to_yaml(path)
     back = ActuatorDesign.from_yaml(path)

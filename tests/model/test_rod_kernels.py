@@ -96,9 +96,8 @@ def test_kernels_run_compiled(solvers):
                               solver._basis, solver._dbasis)
     # The outputs' local problem, whose energy only a line search calls.
     _, kap, along, start = rod_kernels.sample_fields_kernel(
-        x, solver._xq.size, solver._sample_values, solver._sample_derivs,
-        solver._sample_half, solver._sample_point_element, np.array([0.0, 0.5]))
-    local = _PointwiseLocal(solver, kap, along, solver._sample_point_element, 1e5)
+        x, solver._xq.size, *solver._sample_at[1:5], np.array([0.0, 0.5]))
+    local = _PointwiseLocal(solver, kap, along, solver._sample_at[4], 1e5)
     local.energy(start, 1e5, [])
     names = [name for name in rod_kernels.__all__ if name.endswith('_kernel')]
     assert len(names) == len(rod_kernels.__all__) == 13
@@ -335,10 +334,9 @@ def test_local_problem_derivatives_and_step(solvers, states):
     solver, _ = solvers
     x, pressure, force, _ = states[-2]
     fields = rod_kernels.sample_fields_kernel(
-        x, solver._xq.size, solver._sample_values, solver._sample_derivs,
-        solver._sample_half, solver._sample_point_element, np.array(force, dtype=float))
+        x, solver._xq.size, *solver._sample_at[1:5], np.array(force, dtype=float))
     _, kap, along, start = fields
-    problem = _PointwiseLocal(solver, kap, along, solver._sample_point_element, pressure)
+    problem = _PointwiseLocal(solver, kap, along, solver._sample_at[4], pressure)
     energy, grad, hess = problem.derivatives(start, pressure, [])
     assert problem.energy(start, pressure, []) == energy
 

@@ -8,7 +8,7 @@ import pytest
 from scipy.optimize._numdiff import approx_derivative
 
 from fpc_gripper.model import (ActuatorDesign, AdaptiveSolver, CCMSolver, choose_model,
-                               PRESSURE_MODELS, RodSolver, Scene, SolverStatus)
+                               RodSolver, Scene, SolverStatus)
 from fpc_gripper.model.pipeline import finger_model, ModelSettings
 from fpc_gripper.model.section_law import station_layout
 from fpc_gripper.model.selection import a_posteriori_error, load_error_model, make_solver
@@ -30,7 +30,7 @@ class IndependentCCM:
         breaks, types, self.law = station_layout(design, 'exact')
         edges = solver.segments.edges
         self.lengths = np.diff(edges)
-        self.work = PRESSURE_MODELS[solver.pressure_model]
+        self.work = solver.pressure_coefficient
         seg, x, w, kind = [], [], [], []
         for i, (a, b) in enumerate(zip(edges, edges[1:])):
             cuts = np.unique(np.clip(np.concatenate([[a, b], breaks]), a, b))

@@ -346,7 +346,8 @@ def test_bad_input_is_rejected_and_the_state_kept(model, kind, value, text):
 @pytest.mark.parametrize('name, value, reason', [
     ('n_segments', 0, 'out of range'),
     ('n_segments', 65, 'out of range'),
-    ('pressure_model', 'polytropic', "`pressure_model` must be one of ['adiabatic', 'isobaric']"),
+    ('pressure_model', 'polytropic',
+     "`pressure_model` must be one of ['design', 'adiabatic', 'isobaric']"),
     ('max_rate_hz', 0.5, 'out of range'),
     ('max_rate_hz', math.nan, 'max_rate_hz'),
     ('atmospheric_pressure', 2.0e6, 'out of range'),
