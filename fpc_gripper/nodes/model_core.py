@@ -428,6 +428,31 @@ class ModelCore:
             state.failed = None
         self._rigidity.clear()
 
+    def warm_up(self, rigidity=True):
+        """
+        Solve the rest state once per solver, and throw the answers away.
+
+        The first solve of a process loads (or, the first time ever, compiles) the
+        solver's kernels; done here, at start-up, the first input is answered at once.
+        Solvers are pure functions of their inputs, so this changes no later answer, and
+        no finger state is touched: nothing is published for it.
+
+        Parameters
+        ----------
+        rigidity : bool
+            Also one rigidity computation (the bordered system's kernels).
+
+        """
+        for solver in {id(s.solver): s.solver for s in self._states}.values():
+            try:
+                rest = solver.solve(0.0, (0.0, 0.0))
+                if rigidity:
+                    solver.rigidity(0.0, axis='x', displacement=RIGIDITY_DISPLACEMENT,
+                                    initial=rest)
+            except _SOLVER_ERRORS:
+                # The first real solve reports it.
+                pass
+
     # -- inputs -----------------------------------------------------------------------------
 
     def offer_pressure(self, index, absolute, stamp_ns=0, now_ns=0, source='pressure_command'):

@@ -216,6 +216,7 @@ class ModelNode(Node):
             atmospheric_pressure=param('atmospheric_pressure').value,
             stale_after_s=param('stale_after_s').value,
             max_rate_hz=param('max_rate_hz').value, frame_prefix=prefix)
+        self._core.warm_up(rigidity=param('rigidity_rate_hz').value > 0.0)
         names = self._core.names
         self._frames = tuple(prefix + name for name in names)
         self._palm_frame = prefix + _PALM_FRAME

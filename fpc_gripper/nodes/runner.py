@@ -30,8 +30,8 @@ class StopRequest:
     may interrupt the shutdown that the first one started, so the handler never raises
     while the shutdown runs. A signal that comes `force_after_s` or more after the
     first, while a callback still holds the executor (a first-ever numba compile takes
-    minutes), raises KeyboardInterrupt to end that callback: the node is then destroyed
-    as after any other stop.
+    minutes), raises KeyboardInterrupt, once, to end that callback: the node is then
+    destroyed as after any other stop.
 
     Parameters
     ----------
@@ -137,7 +137,7 @@ def run_node(build, name, args=None):
             executor.spin_once()
     except KeyboardInterrupt:
         # A forced stop (see StopRequest): the node is destroyed as after any other.
-        pass
+        get_logger(name).warning('stop forced: a callback that did not finish was interrupted')
     finally:
         stop.stopping = True
         if waker is not None:

@@ -177,6 +177,23 @@ def test_nothing_is_solved_before_a_pressure_then_one_shared_solve_at_rest():
     assert core.fingers[0].coalesced == 0
 
 
+def test_warm_up_solves_once_per_solver_and_leaves_no_state():
+    stiff = DESIGN.replace(prestrain=0.15)
+    core, factory = make_core(designs=(DESIGN, stiff, DESIGN))
+    core.warm_up()
+    assert [len(s.calls) for s in factory.built] == [1, 1]
+    assert [len(s.rigidity_calls) for s in factory.built] == [1, 1]
+    assert all(s.calls[0] == (0.0, (0.0, 0.0), None) for s in factory.built)
+    assert core.ready(0) == () and not core.pending
+    assert all(state.result is None and state.solves == 0 for state in core.fingers)
+    assert core.status(0).message == 'waiting for pressure input'
+    # The first real solve is cold, as without the warm-up: the same answer.
+    core.offer_pressure(0, ATM + 1e5, now_ns=1)
+    (update, *_) = core.process((0,), 0)
+    assert factory.built[0].calls[-1][2] is None
+    assert_same_state(update.result, reference(1e5))
+
+
 def test_frame_prefix_names_the_expected_tip_force_frame():
     core, _ = make_core(frame_prefix='left/')
     assert core.offer_tip_force(1, 0.1, 0.0, 'left/finger_1').accepted

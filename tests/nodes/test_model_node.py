@@ -120,6 +120,14 @@ class Probe:
         with self.cond:
             return self.cond.wait_for(predicate, timeout)
 
+    def wait_connected(self, timeout=TIMEOUT):
+        """Wait until the node subscribes to every input (else a first message is lost)."""
+        pubs = [*self.pressure_pubs.values(), *self.force_pubs.values()]
+        deadline = time.monotonic() + timeout
+        while not all(p.get_subscription_count() for p in pubs):
+            assert time.monotonic() < deadline, 'the model node never subscribed'
+            time.sleep(0.01)
+
     def now(self):
         return self.node.get_clock().now()
 
@@ -176,7 +184,12 @@ def values(status):
 
 
 class Latecomer:
-    """A node that joins late: one subscription per model state topic, with a given QoS."""
+    """
+    A node that joins late: one subscription per model state topic, with a given QoS.
+
+    It lives as long as the module's executor: destroying a node while another thread
+    spins the executor races with its wait set.
+    """
 
     def __init__(self, ros, namespace, qos=LATCHED, name='latecomer'):
         self.ros = ros
@@ -200,11 +213,6 @@ class Latecomer:
     def wait(self, predicate, timeout=TIMEOUT):
         with self.cond:
             return self.cond.wait_for(predicate, timeout)
-
-    def close(self):
-        self.ros.nodes.remove(self.node)
-        self.ros.executor.remove_node(self.node)
-        self.node.destroy_node()
 
 
 class Ros:
@@ -276,14 +284,13 @@ def test_nothing_before_the_first_pressure_then_the_rest_state(ros, model):
         status = probe.status_where(finger, lambda s: s.level == DiagnosticStatus.WARN)
         assert status.message == 'waiting for pressure input'
     # Nothing was published: a transient-local subscriber joining now gets no history.
-    late = Latecomer(ros, '/m')
+    late = Latecomer(ros, '/m', name='early')
     time.sleep(0.5)
     assert late.count() == 0 and all(not probe.shapes[f] for f in FINGERS)
     # A tip force alone is no pressure: still nothing.
     probe.send_force('finger_0', 0.0, 0.0)
     time.sleep(0.3)
     assert late.count() == 0 and not probe.shapes['finger_0']
-    late.close()
     since = len(probe.diagnostics)
     rest = direct(0.0)
     stamps = [probe.send_pressure(f, ATM) for f in FINGERS]
@@ -473,53 +480,35 @@ def test_rigidity_and_markers_for_new_subscribers(ros, model):
         probe.shape_stamped(finger, probe.send_pressure(finger, ATM + 10e3))
     stamp = probe.send_pressure('finger_2', ATM + 55.2e3)
     probe.shape_stamped('finger_2', stamp)
-    got = {'rigidity': [], 'markers': []}
-    cond = threading.Condition()
+    late = Latecomer(ros, '/m', name='slow_outputs')
 
-    def record(key):
-        def store(msg):
-            with cond:
-                got[key].append(msg)
-                cond.notify_all()
-        return store
+    def rigidity_stamped(stamp):
+        return next((m for m in late.got['finger_2/rigidity']
+                     if time_to_ns(m.header.stamp) == stamp), None)
 
-    subs = [probe.node.create_subscription(Vector3Stamped, '/m/finger_2/rigidity',
-                                           record('rigidity'), LATCHED),
-            probe.node.create_subscription(MarkerArray, '/m/markers', record('markers'),
-                                           LATCHED)]
-    try:
-        with cond:
-            # The newest state, from the publishers' transient-local history.
-            assert cond.wait_for(lambda: any(time_to_ns(m.header.stamp) == stamp
-                                             for m in got['rigidity']), TIMEOUT)
-            assert cond.wait_for(lambda: got['markers'], TIMEOUT)
-        rigidity = got['rigidity'][-1]
-        assert rigidity.header.frame_id == 'finger_2'
-        solver = CCMSolver(DESIGN)
-        assert_allclose(rigidity.vector.x, solver.rigidity(55.2e3, axis='x').value, rtol=1e-6)
-        assert_allclose(rigidity.vector.z, solver.rigidity(55.2e3, axis='z').value, rtol=1e-6)
-        assert rigidity.vector.x == pytest.approx(1.396e-3, rel=1e-3)  # SPEC reference
-        markers = {m.id: m for m in got['markers'][-1].markers}
-        assert sorted(markers) == [0, 1, 2]
-        strip = markers[2]
-        assert strip.type == Marker.LINE_STRIP and strip.header.frame_id == 'palm'
-        assert time_to_ns(strip.header.stamp) == stamp
-        points = np.array([[p.x, p.y, p.z] for p in strip.points])
-        # Placed by the controller's palm geometry (an independent formula of the placement).
-        assert_allclose(points, palm_points(2, direct(55.2e3).points), rtol=0, atol=1e-12)
-        # While subscribed, both follow the input (throttled, the last one always sent).
-        stamps = [probe.send_pressure('finger_2', ATM + kpa * 1e3) for kpa in (10, 0)]
-        with cond:
-            assert cond.wait_for(lambda: any(
-                time_to_ns(m.header.stamp) == stamps[-1] for m in got['rigidity']), TIMEOUT)
-            assert cond.wait_for(lambda: any(
-                time_to_ns(m.header.stamp) == stamps[-1] for a in got['markers']
-                for m in a.markers), TIMEOUT)
-        last = next(m for m in got['rigidity'] if time_to_ns(m.header.stamp) == stamps[-1])
-        assert last.vector.x == pytest.approx(1.636e-3, rel=1e-3)  # SPEC reference, 0 kPa
-    finally:
-        for sub in subs:
-            probe.node.destroy_subscription(sub)
+    def markers_stamped(stamp):
+        return next((a for a in late.got['markers'] for m in a.markers
+                     if m.id == 2 and time_to_ns(m.header.stamp) == stamp), None)
+
+    # The newest state, from the publishers' transient-local history.
+    assert late.wait(lambda: rigidity_stamped(stamp) and markers_stamped(stamp))
+    rigidity = rigidity_stamped(stamp)
+    assert rigidity.header.frame_id == 'finger_2'
+    solver = CCMSolver(DESIGN)
+    assert_allclose(rigidity.vector.x, solver.rigidity(55.2e3, axis='x').value, rtol=1e-6)
+    assert_allclose(rigidity.vector.z, solver.rigidity(55.2e3, axis='z').value, rtol=1e-6)
+    assert rigidity.vector.x == pytest.approx(1.396e-3, rel=1e-3)  # SPEC reference
+    markers = {m.id: m for m in markers_stamped(stamp).markers}
+    assert sorted(markers) == [0, 1, 2]
+    strip = markers[2]
+    assert strip.type == Marker.LINE_STRIP and strip.header.frame_id == 'palm'
+    points = np.array([[p.x, p.y, p.z] for p in strip.points])
+    # Placed by the controller's palm geometry (an independent formula of the placement).
+    assert_allclose(points, palm_points(2, direct(55.2e3).points), rtol=0, atol=1e-12)
+    # Both follow the input (throttled, the last one always sent).
+    stamps = [probe.send_pressure('finger_2', ATM + kpa * 1e3) for kpa in (10, 0)]
+    assert late.wait(lambda: rigidity_stamped(stamps[-1]) and markers_stamped(stamps[-1]))
+    assert rigidity_stamped(stamps[-1]).vector.x == pytest.approx(1.636e-3, rel=1e-3)  # 0 kPa
 
 
 @pytest.mark.ros
@@ -579,36 +568,32 @@ def test_late_subscribers_get_the_newest_state_and_volatile_ones_connect(ros, mo
     late = Latecomer(ros, '/m')
     volatile = Latecomer(ros, '/m', qos=QoSProfile(depth=10), name='volatile')
     best_effort = Latecomer(ros, '/m', qos=qos_profile_sensor_data, name='best_effort')
-    try:
-        assert late.wait(lambda: all(late.got.values()))
-        time.sleep(0.3)
-        # Exactly the newest state of each topic, once: history, not a republish.
-        assert {t: len(v) for t, v in late.got.items()} == {t: 1 for t, _ in STATE_TOPICS}
-        assert time_to_ns(late.got['finger_1/shape'][0].header.stamp) == stamp
-        assert_shape_is(late.got['finger_1/shape'][0], expected, 'finger_1')
-        # The circle fit stops at its own tolerance (~1e-10 relative).
-        assert_allclose(late.got['finger_1/curvature'][0].data, expected.curvature, rtol=1e-9)
-        assert time_to_ns(late.got['finger_1/rigidity'][0].header.stamp) == stamp
-        tips = {m.id: m for m in late.got['gripper_shape'][0].markers
-                if m.ns == 'fpc_gripper/tip'}
-        assert time_to_ns(tips[1].header.stamp) == stamp
-        # Volatile and best-effort subscribers are matched, and get no history ...
-        for other in (volatile, best_effort):
-            for topic, _ in STATE_TOPICS:
-                publishers = other.node.get_publishers_info_by_topic(f'/m/{topic}')
-                assert [i.node_name for i in publishers] == ['model_node'], topic
-            assert other.count() == 0
-        assert all(p.get_subscription_count() >= 3 for p in node._shape_pubs)
-        # ... but every answer to a new input.
-        stamp = probe.send_pressure('finger_1', ATM + 140e3)
-        for other in (volatile, best_effort):
-            assert other.wait(lambda o=other: any(
-                time_to_ns(m.header.stamp) == stamp for m in o.got['finger_1/shape'])
-                and o.got['finger_1/curvature'] and o.got['finger_1/rigidity']
-                and o.got['gripper_shape'])
-    finally:
-        for other in (late, volatile, best_effort):
-            other.close()
+    assert late.wait(lambda: all(late.got.values()))
+    time.sleep(0.3)
+    # Exactly the newest state of each topic, once: history, not a republish.
+    assert {t: len(v) for t, v in late.got.items()} == {t: 1 for t, _ in STATE_TOPICS}
+    assert time_to_ns(late.got['finger_1/shape'][0].header.stamp) == stamp
+    assert_shape_is(late.got['finger_1/shape'][0], expected, 'finger_1')
+    # The circle fit stops at its own tolerance (~1e-10 relative).
+    assert_allclose(late.got['finger_1/curvature'][0].data, expected.curvature, rtol=1e-9)
+    assert time_to_ns(late.got['finger_1/rigidity'][0].header.stamp) == stamp
+    tips = {m.id: m for m in late.got['gripper_shape'][0].markers
+            if m.ns == 'fpc_gripper/tip'}
+    assert time_to_ns(tips[1].header.stamp) == stamp
+    # Volatile and best-effort subscribers are matched, and get no history ...
+    for other in (volatile, best_effort):
+        for topic, _ in STATE_TOPICS:
+            publishers = other.node.get_publishers_info_by_topic(f'/m/{topic}')
+            assert [i.node_name for i in publishers] == ['model_node'], topic
+        assert other.count() == 0
+    assert all(p.get_subscription_count() >= 3 for p in node._shape_pubs)
+    # ... but every answer to a new input.
+    stamp = probe.send_pressure('finger_1', ATM + 140e3)
+    for other in (volatile, best_effort):
+        assert other.wait(lambda o=other: any(
+            time_to_ns(m.header.stamp) == stamp for m in o.got['finger_1/shape'])
+            and o.got['finger_1/curvature'] and o.got['finger_1/rigidity']
+            and o.got['gripper_shape'])
 
 
 @pytest.mark.ros
@@ -619,15 +604,12 @@ def test_gripper_shape_places_every_finger_on_the_palm(ros, model):
     stamps = [probe.send_pressure(f, ATM + g) for f, g in zip(FINGERS, gauges)]
     for finger, stamp in zip(FINGERS, stamps):
         probe.shape_stamped(finger, stamp)
-    late = Latecomer(ros, '/m')
-    try:
-        assert late.wait(lambda: any(
-            {time_to_ns(m.header.stamp) for m in a.markers} == set(stamps)
-            for a in late.got['gripper_shape']))
-        shape = next(a for a in late.got['gripper_shape']
-                     if {time_to_ns(m.header.stamp) for m in a.markers} == set(stamps))
-    finally:
-        late.close()
+    late = Latecomer(ros, '/m', name='palm')
+    assert late.wait(lambda: any(
+        {time_to_ns(m.header.stamp) for m in a.markers} == set(stamps)
+        for a in late.got['gripper_shape']))
+    shape = next(a for a in late.got['gripper_shape']
+                 if {time_to_ns(m.header.stamp) for m in a.markers} == set(stamps))
     parts = {(m.ns, m.id): m for m in shape.markers}
     assert all(m.header.frame_id == 'palm' for m in shape.markers)
     results = [direct(g) for g in gauges]
@@ -678,6 +660,7 @@ def test_frame_prefix_and_the_static_palm_transforms(ros, monkeypatch):
         Parameter('tolerance', value=0.0), Parameter('frame_prefix', value='left/')]))
     probe = Probe(ros.context, '/left')
     ros.add(probe.node)
+    probe.wait_connected()
     sent = _FakeBroadcaster.sent
     assert [(t.header.frame_id, t.child_frame_id) for t in sent] == [
         ('left/palm', f'left/{f}') for f in FINGERS]
