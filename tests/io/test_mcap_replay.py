@@ -220,3 +220,27 @@ def test_a_bag_directory_replays_as_the_single_file(tmp_path):
         (qos,) = yaml.safe_load(channel.metadata['offered_qos_profiles'])
         assert (qos['reliability'], qos['durability'], qos['depth']) == (
             'reliable', 'transient_local', 1)
+
+
+def test_frame_prefix_as_the_node(tmp_path, capsys):
+    path = tmp_path / 'in.mcap'
+    with Rosbag2McapWriter(path) as writer:
+        writer.add_topic('/finger_0/pressure_command', 'sensor_msgs/msg/FluidPressure')
+        writer.add_topic('/finger_0/tip_force', 'geometry_msgs/msg/WrenchStamped')
+        writer.write('/finger_0/pressure_command', serialize_message(fluid_pressure(0, 9e4)),
+                     BASE)
+        force = wrench(1, 0.0, 0.2)
+        force.header.frame_id = 'left/finger_0'
+        writer.write('/finger_0/tip_force', serialize_message(force), BASE + PERIOD)
+    out = tmp_path / 'out.mcap'
+    assert main(['replay-model', str(path), str(out), '--no-rigidity', '--quiet']) == 0
+    assert '1 solves, 0 not converged, 1 rejected' in capsys.readouterr().out
+    assert main(['replay-model', str(path), str(out), '--no-rigidity', '--quiet', '--force',
+                 '--frame-prefix', 'left/']) == 0
+    assert '2 solves, 0 not converged, 0 rejected' in capsys.readouterr().out
+    shapes = [m for t, _, _, _, m in read_independently(out) if t == '/finger_0/shape']
+    assert [m.header.frame_id for m in shapes] == ['left/finger_0'] * 2
+    solver = AdaptiveSolver(load_gripper_config(default_gripper_config_path()).fingers[0]
+                            .design, tolerance=ModelSettings().tolerance)
+    tip = shapes[-1].poses[-1].pose.position
+    assert_allclose((tip.x, tip.z), solver.solve(9e4, (0.0, 0.2)).tip, rtol=0, atol=1e-9)
