@@ -201,7 +201,8 @@ def test_installed_model_node_runs_and_stops_on_sigint(prefix):
     process = subprocess.Popen(
         [str(prefix / 'lib' / 'fpc_gripper' / 'model_node'), '--ros-args', '--params-file',
          str(prefix / 'share' / 'fpc_gripper' / 'config' / 'model_node.yaml'),
-         '-p', 'tolerance:=0.0', '-p', 'n_segments:=4', '-r', '__ns:=/layout'],
+         '-p', 'tolerance:=0.0', '-p', 'n_segments:=4', '-p', 'rigidity_rate_hz:=0.0',
+         '-r', '__ns:=/layout'],
         env=_installed_env(prefix), stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:
         # The first solve of a fresh install compiles its kernels (20 s on an idle VM).
@@ -217,8 +218,8 @@ def test_installed_model_node_runs_and_stops_on_sigint(prefix):
         try:
             output, _ = process.communicate(timeout=5)
         except subprocess.TimeoutExpired:
-            # Still in a callback: numba compiles this fresh install's rigidity kernels on
-            # first use, for minutes. A second Ctrl-C, a second after the first, ends it.
+            # Still in a callback (numba compiles a fresh install's kernels on first use,
+            # for minutes): a second Ctrl-C, a second after the first, ends it.
             process.send_signal(signal.SIGINT)
             output, _ = process.communicate(timeout=30)
         assert process.returncode == 0, output

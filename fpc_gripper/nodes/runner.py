@@ -8,6 +8,7 @@ import time
 import rclpy
 from rclpy.exceptions import ParameterException
 from rclpy.executors import SingleThreadedExecutor
+from rclpy.impl.implementation_singleton import rclpy_implementation
 from rclpy.logging import get_logger
 from rclpy.signals import SignalHandlerOptions
 
@@ -18,6 +19,7 @@ FORCE_AFTER_S = 1.0
 #: What a node's constructor raises for a bad configuration: exit 1 with a message.
 START_ERRORS = (ValueError, OSError, ParameterException)
 _STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+RCLError = rclpy_implementation.RCLError
 
 
 class StopRequest:
@@ -124,10 +126,11 @@ def run_node(build, name, args=None):
     previous = {signum: signal.signal(signum, stop) for signum in _STOP_SIGNALS}
     node = executor = waker = None
     try:
-        rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
         try:
+            rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
             node = build()
-        except START_ERRORS as exc:
+        except (*START_ERRORS, RCLError) as exc:
+            # RCLError: rcl refused the command line (say a --params-file it cannot parse).
             get_logger(name).fatal(f'cannot start: {exc}')
             return 1
         executor = SingleThreadedExecutor()
