@@ -69,6 +69,9 @@ _DIAGNOSTICS_PERIOD_S = 1.0
 # Slow outputs, at most once per period and the last update always sent: markers are for
 # people, and rigidity (two displacement-controlled solves) must not hold up the shapes [s].
 _MARKER_PERIOD_S = 1.0 / 30.0
+# Markers cost some 8 ms a send (Python message objects, circle fits): with nobody
+# watching, the newest state still reaches the transient-local history, but at 1 Hz.
+_UNWATCHED_MARKER_PERIOD_S = 1.0
 _PALM_FRAME = 'palm'
 _LEVELS = {Level.OK: DiagnosticStatus.OK, Level.WARN: DiagnosticStatus.WARN,
            Level.ERROR: DiagnosticStatus.ERROR}
@@ -149,8 +152,8 @@ class ModelNode(Node):
     (frame ``<frame_prefix>finger_<i>``, force.x = f0, force.z = p0 [N]) and publishes
     ``shape`` (nav_msgs/Path) and ``curvature`` (std_msgs/Float64, [1/m]) for every
     solved input, ``rigidity`` (x = K_x, z = K_z [N·m²], at most ``rigidity_rate_hz``),
-    and, at most 30 Hz, ``markers`` and ``gripper_shape`` (MarkerArray in the palm
-    frame), plus ``/diagnostics`` (1 Hz and on every change of a finger's level or kind of
+    and ``markers`` and ``gripper_shape`` (MarkerArray in the palm frame; at most 30 Hz
+    while subscribed, 1 Hz otherwise, the newest state always sent), plus ``/diagnostics`` (1 Hz and on every change of a finger's level or kind of
     problem). With tf2_ros importable it also broadcasts the static transforms palm ->
     finger_<i>.
 
@@ -457,6 +460,9 @@ class ModelNode(Node):
     def _flush_slow_outputs(self):
         """Send the slow outputs that are due; wake the timer for the rest."""
         now = time.monotonic_ns()
+        watched = (self._markers_pub.get_subscription_count()
+                   or self._gripper_shape_pub.get_subscription_count())
+        self._markers.period_s = _MARKER_PERIOD_S if watched else _UNWATCHED_MARKER_PERIOD_S
         for slow in (self._markers, self._rigidities):
             if not slow.dirty:
                 continue
