@@ -153,9 +153,9 @@ class ModelNode(Node):
     ``shape`` (nav_msgs/Path) and ``curvature`` (std_msgs/Float64, [1/m]) for every
     solved input, ``rigidity`` (x = K_x, z = K_z [N·m²], at most ``rigidity_rate_hz``),
     and ``markers`` and ``gripper_shape`` (MarkerArray in the palm frame; at most 30 Hz
-    while subscribed, 1 Hz otherwise, the newest state always sent), plus ``/diagnostics`` (1 Hz and on every change of a finger's level or kind of
-    problem). With tf2_ros importable it also broadcasts the static transforms palm ->
-    finger_<i>.
+    while subscribed, 1 Hz otherwise, the newest state always sent), plus
+    ``/diagnostics`` (1 Hz and on every change of a finger's level or kind of problem).
+    With tf2_ros importable it also broadcasts the static transforms palm -> finger_<i>.
 
     Nothing is published for a finger before its first valid pressure (its diagnostics
     say "waiting for pressure input" at WARN). Shape, curvature, rigidity and markers are

@@ -7,6 +7,7 @@ import time
 
 import rclpy
 from rclpy.exceptions import ParameterException
+from rclpy.executors import ExternalShutdownException
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.impl.implementation_singleton import rclpy_implementation
 from rclpy.logging import get_logger
@@ -138,6 +139,9 @@ def run_node(build, name, args=None):
         waker = _Waker(node.create_guard_condition(lambda: None))
         while not stop.requested and rclpy.ok():
             executor.spin_once()
+    except ExternalShutdownException:
+        # Someone shut the context down (rclpy.shutdown()): a stop like any other.
+        pass
     except KeyboardInterrupt:
         # A forced stop (see StopRequest): the node is destroyed as after any other.
         get_logger(name).warning('stop forced: a callback that did not finish was interrupted')
