@@ -4,6 +4,7 @@ import dataclasses
 import enum
 import math
 import numbers
+import pathlib
 
 import numpy as np
 
@@ -82,3 +83,21 @@ def fd_derivative(fun, x, h):
         cols.append((-fun(x + 2 * e) + 8.0 * fun(x + e) - 8.0 * fun(x - e) + fun(x - 2 * e))
                     / (12.0 * h))
     return np.stack(cols, axis=-1)
+
+
+def read_with_rosbags(path):
+    """
+    Read every message of a recording with rosbags (PyPI), a reader independent of mcap's.
+
+    `path` is an MCAP file or a rosbag2 bag directory. The message types come from the
+    recording's own ros2msg schemas, and rosbags checks each against the recorded
+    RIHS01 type hash. Returns ``[(topic, type name, log time [ns], message)]``.
+    """
+    from rosbags.highlevel import AnyReader
+
+    out = []
+    with AnyReader([pathlib.Path(path)]) as reader:
+        for connection, log_time, raw in reader.messages():
+            out.append((connection.topic, connection.msgtype, log_time,
+                        reader.deserialize(raw, connection.msgtype)))
+    return out

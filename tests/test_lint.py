@@ -7,7 +7,7 @@ import sys
 import pytest
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
-TARGETS = ['fpc_gripper', 'tests', 'bench', 'scripts', 'setup.py']
+TARGETS = ['fpc_gripper', 'tests', 'bench', 'scripts', 'launch', 'setup.py']
 # ament_pep257's default ignores, with the summary on the second line (D213).
 PEP257_IGNORE = 'D100,D101,D102,D103,D104,D105,D106,D107,D203,D212,D404'
 

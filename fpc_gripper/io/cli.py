@@ -12,21 +12,39 @@ import shutil
 import sys
 import time
 
-from .mcap_reader import McapFile, McapInputError, recover, UnknownTopicError
-from .mcap_writer import atomic_output, Rosbag2McapWriter, SchemaNotFoundError
+from .mcap_reader import McapInputError, Recording, recover, UnknownTopicError
+from .mcap_writer import atomic_mcap_writer, SchemaNotFoundError
 from .messages import (curvature_message, DEFAULT_ATMOSPHERIC_PRESSURE, finger_topic,
                        MODEL_OUTPUT_TYPES, rigidity_message, serialized_shape, time_to_ns)
 
-__all__ = ['ReplayReport', 'build_parser', 'export_csv', 'file_info', 'main', 'replay_model']
+__all__ = ['ReplayReport', 'build_parser', 'exact_seconds', 'export_csv', 'file_info', 'main',
+           'replay_model']
 
 _INPUT_TOPIC = re.compile(
     r'^(?P<ns>(?:.*/)?)(?P<finger>finger_\d+)/(?P<kind>pressure_command|pressure|tip_force)$')
-# Model outputs are reliable, depth 10, volatile (docs/CONVENTIONS.md).
-_INFINITE = {'sec': 9223372036, 'nsec': 854775807}
-_MODEL_OUTPUT_QOS = [{
-    'history': 'keep_last', 'depth': 10, 'reliability': 'reliable', 'durability': 'volatile',
-    'deadline': _INFINITE, 'lifespan': _INFINITE, 'liveliness': 'automatic',
-    'liveliness_lease_duration': _INFINITE, 'avoid_ros_namespace_conventions': False}]
+
+
+def exact_seconds(nanoseconds):
+    """
+    Format a time in integer nanoseconds as seconds with all nine decimals, exactly.
+
+    A float holds some 16 significant digits, so ``t * 1e-9`` of a time since the epoch
+    (19 digits) invents its last nanoseconds; this is integer arithmetic.
+
+    Parameters
+    ----------
+    nanoseconds : int
+        [ns].
+
+    Returns
+    -------
+    str
+        For instance ``'1700000000.000000007'``.
+
+    """
+    sign = '-' if nanoseconds < 0 else ''
+    sec, nsec = divmod(abs(int(nanoseconds)), 1_000_000_000)
+    return f'{sign}{sec}.{nsec:09d}'
 
 
 # -- info ---------------------------------------------------------------------------------
@@ -37,15 +55,16 @@ def file_info(mcap_file):
 
     Parameters
     ----------
-    mcap_file : McapFile
+    mcap_file : Recording or McapFile
         The recording.
 
     Returns
     -------
     dict
-        ``path, profile, library, message_count, chunk_count, compression, start_ns,
-        end_ns, duration_s, topics`` (each topic: ``type, count, rate_hz``, the rate over
-        that topic's own first-to-last span [Hz]).
+        ``path, files, profile, library, message_count, chunk_count, compression,
+        start_ns, end_ns, duration_ns, duration_s, topics`` (each topic: ``type, count,
+        rate_hz``, the rate over that topic's own first-to-last span [Hz]); times are
+        integer nanoseconds, ``duration_s`` their float difference in seconds.
 
     """
     spans = {}
@@ -61,6 +80,7 @@ def file_info(mcap_file):
                         'rate_hz': rate}
     return {
         'path': str(mcap_file.path),
+        'files': [str(f) for f in getattr(mcap_file, 'files', [mcap_file.path])],
         'profile': mcap_file.header.profile,
         'library': mcap_file.header.library,
         'message_count': mcap_file.message_count,
@@ -68,18 +88,25 @@ def file_info(mcap_file):
         'compression': sorted(c or 'none' for c in mcap_file.compressions),
         'start_ns': mcap_file.start_time,
         'end_ns': mcap_file.end_time,
+        'duration_ns': mcap_file.end_time - mcap_file.start_time,
         'duration_s': (mcap_file.end_time - mcap_file.start_time) * 1e-9,
         'topics': topics,
     }
 
 
 def _print_info(info, out):
-    print(f"file:      {info['path']}", file=out)
+    files = info['files']
+    if files == [info['path']]:
+        print(f"file:      {info['path']}", file=out)
+    else:
+        print(f"bag:       {info['path']} ({len(files)} files: "
+              f"{', '.join(pathlib.Path(f).name for f in files)})", file=out)
     print(f"profile:   {info['profile'] or '(none)'}  library: {info['library']}", file=out)
     print(f"messages:  {info['message_count']} in {info['chunk_count']} chunks "
           f"({', '.join(info['compression']) or 'no chunks'})", file=out)
-    print(f"start:     {info['start_ns'] * 1e-9:.9f} s", file=out)
-    print(f"duration:  {info['duration_s']:.3f} s", file=out)
+    print(f"start:     {exact_seconds(info['start_ns'])} s", file=out)
+    print(f"end:       {exact_seconds(info['end_ns'])} s", file=out)
+    print(f"duration:  {exact_seconds(info['duration_ns'])} s", file=out)
     print('topics:', file=out)
     width = max((len(t) for t in info['topics']), default=0)
     for name, topic in info['topics'].items():
@@ -126,7 +153,7 @@ def export_csv(mcap_file, out_dir, topics=None):
 
     Parameters
     ----------
-    mcap_file : McapFile
+    mcap_file : Recording or McapFile
         The recording.
     out_dir : pathlib.Path
         Output directory (created if missing).
@@ -228,7 +255,6 @@ class _Finger:
         self.name = name
         self.pressure_topic = pressure_topic
         self.force_topic = force_topic
-        self.has_pressure = False
         self.last_rigidity = None
         self.last_rigidity_time = None
 
@@ -281,8 +307,8 @@ def _progress_printer(stream, every_s=1.0):
 
 
 def replay_model(in_path, out_path, *, config=None, settings=None, source='auto',
-                 rigidity=True, rigidity_period=0.0, stale_after_s=None,
-                 copy_inputs=False, compression='zstd', progress=None):
+                 rigidity=True, rigidity_period=0.0, stale_after_s=None, frame_prefix='',
+                 copy_inputs=False, compression='zstd', overwrite=False, progress=None):
     """
     Run the model node's finger pipeline over recorded inputs; write its outputs.
 
@@ -295,13 +321,16 @@ def replay_model(in_path, out_path, *, config=None, settings=None, source='auto'
     the same warm starts and model choice. Every accepted input, once the finger has a
     pressure, is solved (replay has no rate limit), and each converged solve writes
     ``shape``, ``curvature`` and ``rigidity`` under the input's namespace, with the
-    input's log time and the stamp the node would give it. A recording of
-    ``model_node`` with default settings therefore replays to the shapes it published.
+    input's log time, the stamp the node would give it and the node's offered QoS. A
+    recording of ``model_node`` with default settings therefore replays to the shapes it
+    published.
 
     Parameters
     ----------
-    in_path, out_path : str or os.PathLike
-        Input recording and output file (written to a temporary file, then moved).
+    in_path : str or os.PathLike
+        Input recording: an MCAP file or a bag directory (see `Recording`).
+    out_path : str or os.PathLike
+        Output file (written to a temporary file, then moved into place).
     config : str or os.PathLike, optional
         Gripper configuration (default: the package's default configuration).
     settings : ModelSettings, optional
@@ -316,10 +345,15 @@ def replay_model(in_path, out_path, *, config=None, settings=None, source='auto'
     stale_after_s : float, optional
         Inputs whose header stamp is older than this against their log time are
         rejected [s], as ``model_node``'s parameter (default: its default); 0 disables.
+    frame_prefix : str
+        As ``model_node``'s parameter: tip forces must be in ``<frame_prefix>finger_<i>``,
+        the frame the outputs carry.
     copy_inputs : bool
         Also copy the replayed input messages into the output.
     compression : {'zstd', 'lz4', 'none'}
         Chunk compression of the output.
+    overwrite : bool
+        Replace an existing `out_path`; otherwise it is refused.
     progress : callable, optional
         ``progress(done, total, final=False)``, called after each input message.
 
@@ -332,6 +366,7 @@ def replay_model(in_path, out_path, *, config=None, settings=None, source='auto'
 
     from ..model.pipeline import finger_model, ModelSettings
     from ..nodes.model_core import DEFAULT_STALE_AFTER_S, ModelCore
+    from ..nodes.model_node import STATE_QOS
 
     settings = ModelSettings() if settings is None else settings
     stale_after_s = DEFAULT_STALE_AFTER_S if stale_after_s is None else stale_after_s
@@ -341,7 +376,7 @@ def replay_model(in_path, out_path, *, config=None, settings=None, source='auto'
     designs = {f.name: f.design for f in gripper.fingers}
     atmospheric = float(getattr(gripper, 'atmospheric_pressure', DEFAULT_ATMOSPHERIC_PRESSURE))
     report = ReplayReport()
-    with McapFile(in_path) as mcap_file:
+    with Recording(in_path) as mcap_file:
         chosen = _select_inputs(mcap_file, source)
         unknown = sorted({name for _, name in chosen} - set(designs))
         if unknown:
@@ -359,37 +394,33 @@ def replay_model(in_path, out_path, *, config=None, settings=None, source='auto'
         core = ModelCore([(f.name, designs[f.name]) for f in fingers],
                          lambda design: finger_model(design, settings),
                          max_pressure=gripper.max_pressure, atmospheric_pressure=atmospheric,
-                         stale_after_s=stale_after_s)
+                         stale_after_s=stale_after_s, frame_prefix=frame_prefix)
         inputs = sorted(by_topic)
         mcap_file.check_decodable(inputs)
         total = sum(mcap_file.topics[t].message_count for t in inputs)
         report.fingers = [f.prefix + f.name for f in fingers]
-        with atomic_output(out_path, suffix='.mcap') as tmp:
-            writer = Rosbag2McapWriter(tmp, compression=compression, overwrite=True,
-                                       library='fpc-mcap replay-model (mcap-python)')
-            try:
+        with atomic_mcap_writer(out_path, overwrite=overwrite, compression=compression,
+                                library='fpc-mcap replay-model (mcap-python)') as writer:
+            if copy_inputs:
+                for topic in inputs:
+                    schema = mcap_file.schema(topic)
+                    writer.add_topic(
+                        topic, schema.name, definition=schema.data.decode(),
+                        offered_qos_profiles=mcap_file.topics[topic].offered_qos_profiles)
+            for f in fingers:
+                for kind, type_name in MODEL_OUTPUT_TYPES.items():
+                    writer.add_topic(f.prefix + finger_topic(f.name, kind), type_name,
+                                     offered_qos_profiles=[STATE_QOS])
+            for msg in mcap_file.messages(topics=inputs):
+                report.inputs += 1
                 if copy_inputs:
-                    for topic in inputs:
-                        schema = next(s for s in mcap_file.summary.schemas.values()
-                                      if s.name == mcap_file.topics[topic].type_name)
-                        writer.add_topic(
-                            topic, schema.name, definition=schema.data.decode(),
-                            offered_qos_profiles=mcap_file.topics[topic].offered_qos_profiles)
-                for f in fingers:
-                    for kind, type_name in MODEL_OUTPUT_TYPES.items():
-                        writer.add_topic(f.prefix + finger_topic(f.name, kind), type_name,
-                                         offered_qos_profiles=_MODEL_OUTPUT_QOS)
-                for msg in mcap_file.messages(topics=inputs):
-                    report.inputs += 1
-                    if copy_inputs:
-                        writer.write(msg.topic, msg.data, msg.log_time, msg.publish_time)
-                    _replay_one(core, by_topic[msg.topic], msg,
-                                float(rigidity_period) if rigidity else None, writer,
-                                serialize_message, report)
-                    if progress is not None:
-                        progress(report.inputs, total)
-            finally:
-                writer.close()
+                    writer.write(msg.topic, msg.data, msg.log_time, msg.publish_time)
+                finger = by_topic[msg.topic]
+                _replay_one(core, finger, msg, frame_prefix + finger.name,
+                            float(rigidity_period) if rigidity else None, writer,
+                            serialize_message, report)
+                if progress is not None:
+                    progress(report.inputs, total)
         if progress is not None:
             progress(report.inputs, total, final=True)
         report.clipped = sum(state.clamped for state in core.fingers)
@@ -397,14 +428,13 @@ def replay_model(in_path, out_path, *, config=None, settings=None, source='auto'
     return report
 
 
-def _replay_one(core, finger, msg, rigidity_period, writer, serialize, report):
-    """Offer one input to the core and write what it answers; `rigidity_period` None: none."""
+def _replay_one(core, finger, msg, frame, rigidity_period, writer, serialize, report):
+    """Offer one input to the core, write what it answers in `frame`; no rigidity for None."""
     stamp = time_to_ns(msg.ros_msg.header.stamp)
     if msg.topic == finger.pressure_topic:
         kind = finger.pressure_topic.rsplit('/', 1)[-1]
         check = core.offer_pressure(finger.index, msg.ros_msg.fluid_pressure, stamp,
                                     msg.log_time, source=kind)
-        finger.has_pressure |= check.accepted
     else:
         force = msg.ros_msg.wrench.force
         check = core.offer_tip_force(finger.index, force.x, force.z,
@@ -412,9 +442,11 @@ def _replay_one(core, finger, msg, rigidity_period, writer, serialize, report):
     if not check.accepted:
         report.rejected += 1
         return
-    if not finger.has_pressure:
+    # Nothing before the finger's first pressure, as in the node.
+    updates = core.process([finger.index], msg.log_time)
+    if not updates:
         return
-    (update,) = core.process([finger.index], msg.log_time)
+    (update,) = updates
     if update.result is None:
         report.failures += 1
         return
@@ -430,9 +462,9 @@ def _replay_one(core, finger, msg, rigidity_period, writer, serialize, report):
             finger.last_rigidity, finger.last_rigidity_time = k, msg.log_time
             report.rigidity_solves += 2
     outputs = {
-        'shape': serialized_shape(update.result, finger.name, update.stamp_ns),
+        'shape': serialized_shape(update.result, frame, update.stamp_ns),
         'curvature': serialize(curvature_message(update.result)),
-        'rigidity': serialize(rigidity_message(k[0], k[1], finger.name, update.stamp_ns)),
+        'rigidity': serialize(rigidity_message(k[0], k[1], frame, update.stamp_ns)),
     }
     for kind, data in outputs.items():
         topic = finger.prefix + finger_topic(finger.name, kind)
@@ -468,6 +500,9 @@ def _model_settings(args):
         raise McapInputError(str(exc)) from None
 
 
+_IN_HELP = 'MCAP file, or rosbag2 bag directory (metadata.yaml and split .mcap files)'
+
+
 def build_parser():
     """Build the argparse parser of ``fpc-mcap``."""
     parser = argparse.ArgumentParser(
@@ -477,16 +512,16 @@ def build_parser():
     sub = parser.add_subparsers(dest='command', required=True, metavar='COMMAND')
 
     p = sub.add_parser('info', help='topics, message counts, duration and rates',
-                       description='Print the topics, message counts, duration and rates of '
-                                   'a complete MCAP file.')
-    p.add_argument('input', type=pathlib.Path, metavar='IN', help='MCAP file')
+                       description='Print the topics, message counts, exact start and end '
+                                   'times [s], duration and rates of a recording.')
+    p.add_argument('input', type=pathlib.Path, metavar='IN', help=_IN_HELP)
     p.add_argument('--json', action='store_true', help='print JSON instead of a table')
 
     p = sub.add_parser('plot', help='PNG plots of curvature, pressure and finger shapes',
                        description='Write curvature.png and pressure.png (against time from '
                                    'the first message) and shapes.png (finger shapes '
                                    'overlaid at --times) into OUTDIR.')
-    p.add_argument('input', type=pathlib.Path, metavar='IN', help='MCAP file')
+    p.add_argument('input', type=pathlib.Path, metavar='IN', help=_IN_HELP)
     p.add_argument('output', type=pathlib.Path, metavar='OUTDIR',
                    help='output directory (created if missing)')
     p.add_argument('--times', type=_times, default=None,
@@ -501,7 +536,7 @@ def build_parser():
     p = sub.add_parser('export-csv', help='one CSV per topic',
                        description='Write one CSV per topic into OUTDIR: log and publish '
                                    'times [ns], then every field (arrays as JSON).')
-    p.add_argument('input', type=pathlib.Path, metavar='IN', help='MCAP file')
+    p.add_argument('input', type=pathlib.Path, metavar='IN', help=_IN_HELP)
     p.add_argument('output', type=pathlib.Path, metavar='OUTDIR',
                    help='output directory (created if missing)')
     p.add_argument('--topics', nargs='+', default=None, metavar='TOPIC',
@@ -509,17 +544,20 @@ def build_parser():
 
     p = sub.add_parser('recover', help='rebuild a truncated file (e.g. after kill -9)',
                        description='Copy every readable message of a truncated or damaged '
-                                   'MCAP file into a complete, indexed one.')
-    p.add_argument('input', type=pathlib.Path, metavar='IN', help='damaged MCAP file')
+                                   'MCAP file, or of the split files of a bag directory, into '
+                                   'one complete, indexed MCAP file.')
+    p.add_argument('input', type=pathlib.Path, metavar='IN',
+                   help='damaged MCAP file, or a bag directory (with or without metadata.yaml)')
     p.add_argument('output', type=pathlib.Path, metavar='OUT', help='recovered MCAP file')
     p.add_argument('--compression', choices=('zstd', 'lz4', 'none'), default='zstd',
                    help='chunk compression of OUT (default zstd)')
+    p.add_argument('--force', action='store_true', help='replace OUT if it exists')
 
     p = sub.add_parser('replay-model', help='run the CCM model on recorded pressures',
                        description='Solve the CCM model for every recorded finger_<i>/pressure '
                                    '(or pressure_command) and tip_force message, warm-started, '
                                    'and write finger_<i>/shape, curvature and rigidity to OUT.')
-    p.add_argument('input', type=pathlib.Path, metavar='IN', help='MCAP file')
+    p.add_argument('input', type=pathlib.Path, metavar='IN', help=_IN_HELP)
     p.add_argument('output', type=pathlib.Path, metavar='OUT', help='output MCAP file')
     p.add_argument('--config', type=pathlib.Path, default=None,
                    help='gripper configuration YAML (default: the package default)')
@@ -540,6 +578,9 @@ def build_parser():
                    help='reject inputs whose stamp is older than S against their log time, '
                         f"as model_node's stale_after_s (default {DEFAULT_STALE_AFTER_S:g}; "
                         '0 disables)')
+    p.add_argument('--frame-prefix', default='', metavar='PREFIX',
+                   help="frame prefix, as model_node's frame_prefix: tip forces in "
+                        'PREFIXfinger_<i>, outputs framed so (default none)')
     p.add_argument('--source', choices=('auto', 'pressure', 'pressure_command'),
                    default='auto', help='pressure topic to replay (default: measured '
                                         'pressure if recorded, else pressure_command)')
@@ -552,13 +593,14 @@ def build_parser():
                    help='also copy the replayed input messages into OUT')
     p.add_argument('--compression', choices=('zstd', 'lz4', 'none'), default='zstd',
                    help='chunk compression of OUT (default zstd)')
+    p.add_argument('--force', action='store_true', help='replace OUT if it exists')
     p.add_argument('--quiet', action='store_true', help='no progress on stderr')
     return parser
 
 
 def _run(args, out, err):
     if args.command == 'info':
-        with McapFile(args.input) as f:
+        with Recording(args.input) as f:
             info = file_info(f)
         if args.json:
             print(json.dumps(info, indent=2), file=out)
@@ -568,7 +610,7 @@ def _run(args, out, err):
         from .plots import make_plots
         if args.output.exists() and not args.output.is_dir():
             raise McapInputError(f'{args.output}: exists and is not a directory')
-        with McapFile(args.input) as f:
+        with Recording(args.input) as f:
             created = not args.output.exists()
             args.output.mkdir(parents=True, exist_ok=True)
             try:
@@ -582,14 +624,16 @@ def _run(args, out, err):
         for path in written:
             print(path, file=out)
     elif args.command == 'export-csv':
-        with McapFile(args.input) as f:
+        with Recording(args.input) as f:
             written = export_csv(f, args.output, topics=args.topics)
         for path in written.values():
             print(path, file=out)
     elif args.command == 'recover':
-        report = recover(args.input, args.output, compression=args.compression)
+        report = recover(args.input, args.output, compression=args.compression,
+                         overwrite=args.force)
         state = 'complete' if report.complete else f'cut off ({report.dropped_bytes} bytes lost)'
-        print(f'recovered {report.messages} messages from {report.chunks} chunks; input was '
+        print(f'recovered {report.messages} messages from {report.chunks} chunks of '
+              f'{report.files} file{"s" * (report.files != 1)}; input was '
               f'{state}; {report.corrupt_chunks} damaged chunks skipped, '
               f'{report.skipped_messages} messages without schema skipped -> {args.output}',
               file=out)
@@ -599,8 +643,9 @@ def _run(args, out, err):
         report = replay_model(args.input, args.output, config=args.config, settings=settings,
                               source=args.source, rigidity=not args.no_rigidity,
                               rigidity_period=args.rigidity_period,
-                              stale_after_s=args.stale_after, copy_inputs=args.copy_inputs,
-                              compression=args.compression, progress=progress)
+                              stale_after_s=args.stale_after, frame_prefix=args.frame_prefix,
+                              copy_inputs=args.copy_inputs, compression=args.compression,
+                              overwrite=args.force, progress=progress)
         print(f'replayed {report.inputs} inputs of {", ".join(report.fingers)}: '
               f'{report.solves} solves, {report.failures} not converged, '
               f'{report.rejected} rejected, {report.clipped} below atmospheric '

@@ -1,8 +1,10 @@
-"""MCAP reading with clear errors for bad files, and recovery of files cut off by a crash."""
+"""MCAP reading (single files and rosbag2 bag directories), and recovery after a crash."""
 
 import dataclasses
+import heapq
 import io
 import pathlib
+import re
 import struct
 import zlib
 
@@ -13,17 +15,20 @@ from mcap.reader import make_reader
 from mcap.records import Channel, Chunk, Header, Message, Metadata, Schema
 from mcap.stream_reader import breakup_chunk
 from mcap_ros2.decoder import DecoderFactory
+import yaml
 
-from .mcap_writer import atomic_output, MESSAGE_ENCODING, Rosbag2McapWriter, SCHEMA_ENCODING
+from .mcap_writer import atomic_mcap_writer, MESSAGE_ENCODING, SCHEMA_ENCODING
 
 __all__ = [
     'CorruptFileError', 'McapFile', 'McapInputError', 'MissingSchemaError',
-    'RecordedMessage', 'RecoveryReport', 'TopicInfo', 'TruncatedFileError',
-    'UnknownTopicError', 'recover',
+    'RecordedMessage', 'Recording', 'RecoveryReport', 'TopicInfo', 'TruncatedFileError',
+    'UnknownTopicError', 'recording_files', 'recover',
 ]
 
 _MAGIC = bytes((137, 77, 67, 65, 80, 48, 13, 10))
 _FOOTER_RECORD_SIZE = 1 + 8 + 8 + 8 + 4
+_BAG_METADATA = 'metadata.yaml'
+_SPLIT_INDEX = re.compile(r'_(\d+)\.mcap$')
 # Everything a damaged file can make the mcap library raise while parsing.
 _PARSE_ERRORS = (McapError, struct.error, ValueError, EOFError, KeyError, IndexError,
                  UnicodeDecodeError, RuntimeError, MemoryError, zlib.error)
@@ -90,7 +95,61 @@ class RecordedMessage:
     ros_msg: object = None
 
 
-class McapFile:
+class _TopicChecks:
+    """Checks of a topic list against a recording's `_topics` (TopicInfo by name)."""
+
+    def check_topics(self, topics):
+        """
+        Check that every topic is in the recording.
+
+        Raises
+        ------
+        UnknownTopicError
+            Naming the missing topics and the ones the recording has.
+
+        """
+        missing = [t for t in topics if t not in self._topics]
+        if missing:
+            raise UnknownTopicError(
+                f'{self.path}: unknown topic(s) {", ".join(missing)}; '
+                f'the file has {", ".join(sorted(self._topics)) or "no topics"}')
+
+    def check_decodable(self, topics):
+        """
+        Check that the topics carry CDR messages with a ros2msg schema.
+
+        Raises
+        ------
+        MissingSchemaError
+            If a topic's channel has no schema, or an encoding this package cannot decode.
+
+        """
+        for topic in topics:
+            info = self._topics[topic]
+            if not info.type_name:
+                raise MissingSchemaError(f'{self.path}: topic {topic} has no schema')
+            if info.schema_encoding != SCHEMA_ENCODING:
+                raise MissingSchemaError(
+                    f'{self.path}: topic {topic} has schema encoding '
+                    f'{info.schema_encoding!r}, not {SCHEMA_ENCODING!r}')
+            if info.message_encoding != MESSAGE_ENCODING:
+                raise MissingSchemaError(
+                    f'{self.path}: topic {topic} has message encoding '
+                    f'{info.message_encoding!r}, not {MESSAGE_ENCODING!r}')
+
+    @property
+    def topics(self):
+        """Every topic, by name (TopicInfo)."""
+        return dict(self._topics)
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
+class McapFile(_TopicChecks):
     """
     A complete, indexed MCAP file opened for reading.
 
@@ -170,11 +229,6 @@ class McapFile:
     # -- properties ---------------------------------------------------------------------
 
     @property
-    def topics(self):
-        """Every topic in the file, by name (TopicInfo)."""
-        return dict(self._topics)
-
-    @property
     def message_count(self):
         """Messages in the file."""
         stats = self.summary.statistics
@@ -219,45 +273,6 @@ class McapFile:
 
     # -- messages -----------------------------------------------------------------------
 
-    def check_topics(self, topics):
-        """
-        Check that every topic is in the file.
-
-        Raises
-        ------
-        UnknownTopicError
-            Naming the missing topics and the ones the file has.
-
-        """
-        missing = [t for t in topics if t not in self._topics]
-        if missing:
-            raise UnknownTopicError(
-                f'{self.path}: unknown topic(s) {", ".join(missing)}; '
-                f'the file has {", ".join(sorted(self._topics)) or "no topics"}')
-
-    def check_decodable(self, topics):
-        """
-        Check that the topics carry CDR messages with a ros2msg schema.
-
-        Raises
-        ------
-        MissingSchemaError
-            If a topic's channel has no schema, or an encoding this package cannot decode.
-
-        """
-        for topic in topics:
-            info = self._topics[topic]
-            if not info.type_name:
-                raise MissingSchemaError(f'{self.path}: topic {topic} has no schema')
-            if info.schema_encoding != SCHEMA_ENCODING:
-                raise MissingSchemaError(
-                    f'{self.path}: topic {topic} has schema encoding '
-                    f'{info.schema_encoding!r}, not {SCHEMA_ENCODING!r}')
-            if info.message_encoding != MESSAGE_ENCODING:
-                raise MissingSchemaError(
-                    f'{self.path}: topic {topic} has message encoding '
-                    f'{info.message_encoding!r}, not {MESSAGE_ENCODING!r}')
-
     def messages(self, topics=None, decode=True):
         """
         Iterate over messages in log-time order.
@@ -300,15 +315,165 @@ class McapFile:
             raise CorruptFileError(f'{self.path}: damaged data ({type(err).__name__}: {err}); '
                                    f'"fpc-mcap recover" keeps the readable chunks') from None
 
+    def schema(self, topic):
+        """Return the Schema record (name, encoding, data) of a topic's channel, or None."""
+        for channel in self.summary.channels.values():
+            if channel.topic == topic:
+                return self.summary.schemas.get(channel.schema_id)
+        return None
+
     def close(self):
         """Close the file."""
         self._stream.close()
 
-    def __enter__(self):
-        return self
 
-    def __exit__(self, *exc):
-        self.close()
+def _split_key(path):
+    match = _SPLIT_INDEX.search(path.name)
+    return (int(match.group(1)) if match else -1, path.name)
+
+
+def recording_files(path):
+    """
+    List the MCAP files of a recording, in order.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        An MCAP file, or a rosbag2 bag directory: its ``metadata.yaml`` names the files
+        (``relative_file_paths``); without one (a recorder killed before it wrote it),
+        every ``*.mcap`` file in it, by split index (``<name>_<i>.mcap``).
+
+    Returns
+    -------
+    list of pathlib.Path
+
+    Raises
+    ------
+    McapInputError
+        If the path does not exist, the metadata is unreadable or not an MCAP bag, or a
+        file it names is missing.
+
+    """
+    path = pathlib.Path(path)
+    if not path.exists():
+        raise McapInputError(f'{path}: no such file or directory')
+    if not path.is_dir():
+        return [path]
+    meta = path / _BAG_METADATA
+    if not meta.is_file():
+        files = sorted(path.glob('*.mcap'), key=_split_key)
+        if not files:
+            raise McapInputError(f'{path}: a directory without {_BAG_METADATA} or .mcap files, '
+                                 'not a rosbag2 bag')
+        return files
+    try:
+        info = yaml.safe_load(meta.read_text(encoding='utf-8'))['rosbag2_bagfile_information']
+        storage = info.get('storage_identifier', '')
+        names = [pathlib.PurePath(str(n)).name for n in info['relative_file_paths']]
+    except (OSError, yaml.YAMLError, KeyError, TypeError, AttributeError) as err:
+        raise McapInputError(f'{meta}: not rosbag2 bag metadata ({type(err).__name__}: '
+                             f'{err})') from None
+    if storage != 'mcap':
+        raise McapInputError(f"{meta}: storage_identifier {storage!r} is not 'mcap'")
+    files = [path / name for name in names]
+    missing = [f.name for f in files if not f.is_file()]
+    if missing or not files:
+        raise McapInputError(f'{meta}: names files that are missing: '
+                             f'{", ".join(missing) or "none listed"}')
+    return files
+
+
+class Recording(_TopicChecks):
+    """
+    A recording opened for reading: one MCAP file, or a rosbag2 bag directory of splits.
+
+    Reads like a `McapFile` (topics, counts, times, decoded messages in log-time order),
+    over every file of the recording; each file is checked when opened.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        See `recording_files`.
+
+    Raises
+    ------
+    McapInputError
+        As `recording_files` and `McapFile` raise them.
+
+    """
+
+    def __init__(self, path):
+        self.path = pathlib.Path(path)
+        self.files = recording_files(self.path)
+        self._parts = []
+        try:
+            for file in self.files:
+                self._parts.append(McapFile(file))
+        except BaseException:
+            self.close()
+            raise
+        self.header = self._parts[0].header
+        self._topics = {}
+        for part in self._parts:
+            for name, info in part.topics.items():
+                known = self._topics.get(name)
+                if known is not None:
+                    info = dataclasses.replace(
+                        known, message_count=known.message_count + info.message_count)
+                self._topics[name] = info
+
+    @property
+    def message_count(self):
+        """Messages in every file."""
+        return sum(p.message_count for p in self._parts)
+
+    @property
+    def start_time(self):
+        """Log time of the first message [ns]."""
+        return min((p.start_time for p in self._parts if p.message_count), default=0)
+
+    @property
+    def end_time(self):
+        """Log time of the last message [ns]."""
+        return max((p.end_time for p in self._parts if p.message_count), default=0)
+
+    @property
+    def chunk_count(self):
+        """Chunks in every file."""
+        return sum(p.chunk_count for p in self._parts)
+
+    @property
+    def compressions(self):
+        """Chunk compressions used ('' is none)."""
+        return set().union(*(p.compressions for p in self._parts))
+
+    def metadata(self):
+        """Read the metadata records of every file: list of (name, dict)."""
+        return [record for part in self._parts for record in part.metadata()]
+
+    def schema(self, topic):
+        """Return the Schema record of a topic (from the first file that has it), or None."""
+        return next((s for s in (p.schema(topic) for p in self._parts) if s is not None), None)
+
+    def messages(self, topics=None, decode=True):
+        """
+        Iterate over the messages of every file in log-time order.
+
+        Parameters and errors as `McapFile.messages`; messages of equal log time keep the
+        order of their files.
+        """
+        topics = list(self._topics) if topics is None else list(topics)
+        self.check_topics(topics)
+        if decode:
+            self.check_decodable(topics)
+        streams = [p.messages([t for t in topics if t in p.topics], decode)
+                   for p in self._parts]
+        return heapq.merge(*streams, key=lambda m: m.log_time)
+
+    def close(self):
+        """Close every file."""
+        for part in self._parts:
+            part.close()
 
 
 @dataclasses.dataclass
@@ -327,11 +492,13 @@ class RecoveryReport:
     skipped_messages : int
         Messages of channels without a usable schema.
     complete : bool
-        Whether the input had its footer (it was not cut off).
+        Whether every input file had its footer (none was cut off).
     dropped_bytes : int
-        Bytes after the last whole record that could not be read [bytes].
+        Bytes after the last whole record of each file that could not be read [bytes].
     topics : dict of str to int
         Messages per topic in the output.
+    files : int
+        Input files read (the split files of a bag directory).
 
     """
 
@@ -342,6 +509,7 @@ class RecoveryReport:
     complete: bool = False
     dropped_bytes: int = 0
     topics: dict = dataclasses.field(default_factory=dict)
+    files: int = 0
 
 
 def _records(stream, size, report):
@@ -369,22 +537,28 @@ def _parse(cls, body, *args):
     return cls.read(ReadDataStream(io.BytesIO(body)), *args)
 
 
-def recover(in_path, out_path, *, compression='zstd'):
+def recover(in_path, out_path, *, compression='zstd', overwrite=False):
     """
-    Rewrite a possibly truncated MCAP file into a complete, indexed one.
+    Rewrite a possibly truncated recording into one complete, indexed MCAP file.
 
-    Reads record by record up to the last whole record; chunks whose CRC or decompression
-    fails are skipped and counted. Schemas, channels (with their metadata), messages and
-    metadata records are written to `out_path` in rosbag2's form with a fresh summary,
-    index and ``rosbag2`` metadata record. The output is written to a temporary file
-    beside `out_path` and moved into place only when complete.
+    Reads each file record by record up to its last whole record; chunks whose CRC or
+    decompression fails are skipped and counted. Schemas, channels (with their metadata),
+    messages and metadata records are written to `out_path` in rosbag2's form with a
+    fresh summary, index and ``rosbag2`` metadata record (which names `out_path`). The
+    output is written to a temporary file beside `out_path` and moved into place only
+    when complete.
 
     Parameters
     ----------
-    in_path, out_path : str or os.PathLike
-        Input and output files.
+    in_path : str or os.PathLike
+        An MCAP file, or a bag directory whose split files are read in order (see
+        `recording_files`; a recorder killed before it wrote metadata.yaml left one).
+    out_path : str or os.PathLike
+        Output file.
     compression : {'zstd', 'lz4', 'none'}
         Chunk compression of the output.
+    overwrite : bool
+        Replace an existing `out_path`; otherwise it is refused.
 
     Returns
     -------
@@ -394,38 +568,48 @@ def recover(in_path, out_path, *, compression='zstd'):
     ------
     McapInputError
         If the input is missing, not MCAP, or has no readable message at all.
+    FileExistsError
+        If `out_path` exists and `overwrite` is false.
 
     """
     in_path = pathlib.Path(in_path)
     out_path = pathlib.Path(out_path)
-    if in_path.resolve() == out_path.resolve():
+    files = recording_files(in_path)
+    if out_path.resolve() in {in_path.resolve(), *(f.resolve() for f in files)}:
         raise McapInputError(f'{in_path}: input and output must differ')
-    try:
-        stream = open(in_path, 'rb')
-    except FileNotFoundError:
-        raise McapInputError(f'{in_path}: no such file') from None
-    except IsADirectoryError:
-        raise McapInputError(f'{in_path}: is a directory, not an MCAP file') from None
-    report = RecoveryReport()
-    with stream, atomic_output(out_path, suffix='.mcap') as tmp:
-        size = in_path.stat().st_size
-        if size == 0:
-            raise CorruptFileError(f'{in_path}: empty file, not an MCAP file')
-        if stream.read(len(_MAGIC)) != _MAGIC:
-            raise CorruptFileError(f'{in_path}: not an MCAP file (bad magic bytes)')
-        writer = Rosbag2McapWriter(tmp, compression=compression, overwrite=True,
-                                   library='fpc-mcap recover (mcap-python)')
-        try:
-            _copy_records(stream, size, writer, report)
-        finally:
-            writer.close()
+    report = RecoveryReport(complete=True)
+    with atomic_mcap_writer(out_path, overwrite=overwrite, compression=compression,
+                            library='fpc-mcap recover (mcap-python)') as writer:
+        for file in files:
+            part = _recover_file(file, writer, report)
+            report.files += 1
+            report.complete &= part.complete
+            report.dropped_bytes += part.dropped_bytes
         if report.messages == 0 and report.corrupt_chunks:
             raise CorruptFileError(f'{in_path}: no readable chunk '
                                    f'({report.corrupt_chunks} damaged)')
     return report
 
 
-def _copy_records(stream, size, writer, report):
+def _recover_file(path, writer, report):
+    """Copy what is readable of one file; return its own report (completeness, bytes lost)."""
+    try:
+        stream = open(path, 'rb')
+    except IsADirectoryError:
+        raise McapInputError(f'{path}: is a directory, not an MCAP file') from None
+    with stream:
+        size = path.stat().st_size
+        if size == 0:
+            raise CorruptFileError(f'{path}: empty file, not an MCAP file')
+        if stream.read(len(_MAGIC)) != _MAGIC:
+            raise CorruptFileError(f'{path}: not an MCAP file (bad magic bytes)')
+        part = RecoveryReport()
+        _copy_records(stream, size, writer, part, report)
+    return part
+
+
+def _copy_records(stream, size, writer, part, report):
+    """Copy one file's readable records; `part` gets its completeness, `report` the counts."""
     schemas = {}
     channels = {}
 
@@ -461,7 +645,7 @@ def _copy_records(stream, size, writer, report):
         elif isinstance(record, Message):
             add_message(record)
 
-    for opcode, body in _records(stream, size, report):
+    for opcode, body in _records(stream, size, part):
         try:
             if opcode == Opcode.HEADER:
                 _parse(Header, body)

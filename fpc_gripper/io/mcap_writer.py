@@ -14,7 +14,8 @@ import yaml
 __all__ = [
     'BAG_METADATA_VERSION', 'DEFINITION_SEPARATOR', 'MESSAGE_ENCODING', 'PROFILE',
     'SCHEMA_ENCODING', 'McapWriterError', 'Rosbag2McapWriter', 'SchemaNotFoundError',
-    'atomic_output', 'message_definition', 'normalize_type_name', 'qos_profile_to_dict',
+    'atomic_mcap_writer', 'atomic_output', 'message_definition', 'normalize_type_name',
+    'qos_profile_to_dict',
     'serialize_qos_profiles', 'share_directory', 'type_description_hash', 'type_name_of',
 ]
 
@@ -84,6 +85,46 @@ def atomic_output(target, suffix=None):
     finally:
         with contextlib.suppress(FileNotFoundError):
             tmp.unlink()
+
+
+@contextlib.contextmanager
+def atomic_mcap_writer(target, *, overwrite=False, **kwargs):
+    """
+    Yield a `Rosbag2McapWriter` whose single file appears at `target` only when complete.
+
+    The file is written under a temporary name beside `target` (`atomic_output`), closed
+    with its summary and index, and moved into place; its rosbag2 metadata names
+    `target`, the file that exists afterwards, never the temporary one. If the body
+    raises, `target` is left as it was.
+
+    Parameters
+    ----------
+    target : str or os.PathLike
+        Final ``.mcap`` file.
+    overwrite : bool
+        Replace an existing `target`; otherwise refuse it before writing anything.
+    **kwargs
+        Passed to `Rosbag2McapWriter` (compression, chunk_size, library, ...).
+
+    Yields
+    ------
+    Rosbag2McapWriter
+
+    Raises
+    ------
+    FileExistsError
+        If `target` exists and `overwrite` is false.
+
+    """
+    target = pathlib.Path(target)
+    if not overwrite and (target.exists() or target.is_symlink()):
+        raise FileExistsError(f'output {target} exists (give --force to replace it)')
+    with atomic_output(target, suffix='.mcap') as tmp:
+        writer = Rosbag2McapWriter(tmp, overwrite=True, final_name=target.name, **kwargs)
+        try:
+            yield writer
+        finally:
+            writer.close()
 
 
 def normalize_type_name(type_name):
@@ -413,12 +454,16 @@ class Rosbag2McapWriter:
         Header library string.
     ros_distro : str, optional
         ROS distribution recorded in the metadata (default ``$ROS_DISTRO`` or ``jazzy``).
+    final_name : str, optional
+        File name recorded in the rosbag2 metadata instead of `output_path`'s: the name
+        the file will have once moved into place (see `atomic_mcap_writer`). Single
+        files only, without splitting.
 
     """
 
     def __init__(self, output_path, *, compression='zstd', chunk_size=768 * 1024,
                  max_file_size=0, max_duration=0, overwrite=False, library=None,
-                 ros_distro=None):
+                 ros_distro=None, final_name=None):
         if compression not in _COMPRESSION:
             raise ValueError(f'`compression` must be one of {sorted(_COMPRESSION)}, '
                              f'got {compression!r}')
@@ -440,6 +485,10 @@ class Rosbag2McapWriter:
                 raise FileExistsError(f'output file {path} exists')
             if not path.parent.is_dir():
                 raise FileNotFoundError(f'directory of {path} does not exist')
+        if final_name is not None and (self._directory_mode or max_file_size or max_duration):
+            raise ValueError(f'`final_name` is for a single file without splits, got '
+                             f'{final_name!r} for {path}')
+        self._final_name = final_name
         self._path = path
         self._compression = compression
         self._chunk_size = int(chunk_size)
@@ -667,7 +716,7 @@ class Rosbag2McapWriter:
 
     def _file_info(self, f):
         start = f.start or 0
-        return {'path': f.path.name,
+        return {'path': self._final_name or f.path.name,
                 'starting_time': {'nanoseconds_since_epoch': int(start)},
                 'duration': {'nanoseconds': int((f.end or start) - start)},
                 'message_count': int(sum(f.counts.values()))}
@@ -676,34 +725,37 @@ class Rosbag2McapWriter:
         f = self._file
         if f is None:
             return
-        files = [{k: v for k, v in g.items() if k not in ('abs', 'counts', 'start', 'end')}
-                 for g in self._files] + [self._file_info(f)]
-        metadata = _bag_metadata(self._topics, f.counts, f.start, f.end, files,
-                                 self._ros_distro)
+        info = self._file_info(f)
+        info.update(abs=str(f.path), counts=dict(f.counts), start=f.start, end=f.end)
+        # As rosbag2 does, each file carries the bag's metadata so far: every file up to
+        # and including this one, and their messages.
         f.writer.add_metadata('rosbag2', {
-            'serialized_metadata': yaml.safe_dump(metadata, sort_keys=False)})
+            'serialized_metadata': yaml.safe_dump(self._bag_metadata([*self._files, info]),
+                                                  sort_keys=False)})
         f.writer.finish()
         f.stream.flush()
         os.fsync(f.stream.fileno())
         f.stream.close()
-        info = self._file_info(f)
-        info.update(abs=str(f.path), counts=dict(f.counts), start=f.start, end=f.end)
         self._files.append(info)
         self._file = None
 
-    def _write_metadata_yaml(self):
+    def _bag_metadata(self, files):
+        """Return rosbag2's BagMetadata mapping of the given closed files."""
         counts = {}
-        starts = [f['start'] for f in self._files if f['start'] is not None]
-        ends = [f['end'] for f in self._files if f['end'] is not None]
-        for f in self._files:
+        for f in files:
             for topic, n in f['counts'].items():
                 counts[topic] = counts.get(topic, 0) + n
-        files = [{k: v for k, v in f.items() if k not in ('abs', 'counts', 'start', 'end')}
-                 for f in self._files]
-        metadata = _bag_metadata(self._topics, counts, min(starts, default=0),
-                                 max(ends, default=0), files, self._ros_distro)
+        starts = [f['start'] for f in files if f['start'] is not None]
+        ends = [f['end'] for f in files if f['end'] is not None]
+        return _bag_metadata(
+            self._topics, counts, min(starts, default=0), max(ends, default=0),
+            [{k: v for k, v in f.items() if k not in ('abs', 'counts', 'start', 'end')}
+             for f in files], self._ros_distro)
+
+    def _write_metadata_yaml(self):
         target = self._path / 'metadata.yaml'
         tmp = target.with_name('.metadata.yaml.tmp')
-        tmp.write_text(yaml.safe_dump({'rosbag2_bagfile_information': metadata},
-                                      sort_keys=False), encoding='utf-8')
+        tmp.write_text(yaml.safe_dump({'rosbag2_bagfile_information':
+                                       self._bag_metadata(self._files)}, sort_keys=False),
+                       encoding='utf-8')
         os.replace(tmp, target)

@@ -1,10 +1,11 @@
 """Pure conversions between CCM results and the gripper's ROS messages, and topic names."""
 
+import dataclasses
 import math
 import struct
 
 from builtin_interfaces.msg import Time
-from geometry_msgs.msg import Point, PoseStamped, Vector3Stamped
+from geometry_msgs.msg import Point, PoseStamped, TransformStamped, Vector3Stamped
 from nav_msgs.msg import Path
 import numpy as np
 from std_msgs.msg import ColorRGBA, Float64
@@ -21,9 +22,9 @@ DEFAULT_ATMOSPHERIC_PRESSURE = 101325.0
 #: Per-finger topics, relative to the node namespace, under ``finger_<i>/``.
 FINGER_TOPICS = ('pressure_command', 'pressure', 'tip_force', 'shape', 'curvature',
                  'rigidity')
-#: Gripper-level topics (relative, except the absolute ``/diagnostics``).
-GRIPPER_TOPICS = ('markers', 'aperture_command', 'grasp_force_command', 'aperture',
-                  'controller_state', '/diagnostics')
+#: Gripper-level topics (relative, except the absolute ``/diagnostics`` and ``/tf_static``).
+GRIPPER_TOPICS = ('markers', 'gripper_shape', 'aperture_command', 'grasp_force_command',
+                  'aperture', 'controller_state', '/diagnostics', '/tf_static')
 #: Message types of the model outputs, by per-finger topic.
 MODEL_OUTPUT_TYPES = {
     'shape': 'nav_msgs/msg/Path',
@@ -277,10 +278,17 @@ def model_messages(result, frame_id, stamp_ns, rigidity=(None, None)):
 
 # -- Additions for the model node: a fast serialized shape, and RViz/Foxglove markers. --------
 
-__all__ += ['SHAPE_MARKER_NAMESPACE', 'serialized_shape', 'shape_marker']
+__all__ += ['GRIPPER_SHAPE_NAMESPACES', 'SHAPE_MARKER_NAMESPACE', 'FingerPlacement',
+            'gripper_shape_markers', 'palm_transform', 'serialized_shape', 'shape_marker']
 
 #: ``ns`` of the per-finger LINE_STRIP markers on ``markers``; the marker id is the finger index.
 SHAPE_MARKER_NAMESPACE = 'fpc_gripper/shape'
+#: ``ns`` of the markers on ``gripper_shape``, by part; the marker id is the finger index.
+GRIPPER_SHAPE_NAMESPACES = {'midplane': 'fpc_gripper/midplane', 'tip': 'fpc_gripper/tip',
+                            'circle': 'fpc_gripper/circle'}
+#: Fitted circles larger than this are not drawn (a nearly flat finger) [m].
+MAX_CIRCLE_RADIUS = 0.5
+_CIRCLE_POINTS = 73
 #: CDR little-endian encapsulation, as every ROS 2 middleware writes it.
 _CDR_LE = b'\x00\x01\x00\x00'
 
@@ -345,8 +353,137 @@ def serialized_shape(result, frame_id, stamp_ns):
     return _CDR_LE + bytes(out)
 
 
+@dataclasses.dataclass(frozen=True)
+class FingerPlacement:
+    """
+    Where a finger is clamped on the palm, and the rigid transform of its frame.
+
+    The palm frame has its origin at the palm centre, x and y in the palm plane (mount
+    angle 0 along x) and z along the palm normal, towards the object. The finger frame's
+    origin is the clamp edge at `palm_radius` and `mount_angle`; its X axis is the palm
+    normal and its Z axis points radially outwards, so its Y axis is Z x X.
+
+    Attributes
+    ----------
+    palm_radius : float
+        Palm centre to the clamp edge [m].
+    mount_angle : float
+        Azimuth of the finger [rad].
+
+    """
+
+    palm_radius: float
+    mount_angle: float
+
+    @property
+    def rotation(self):
+        """Rotation matrix (3, 3) whose columns are the finger axes in the palm frame."""
+        c, s = math.cos(self.mount_angle), math.sin(self.mount_angle)
+        return np.array([[0.0, s, c], [0.0, -c, s], [1.0, 0.0, 0.0]])
+
+    @property
+    def translation(self):
+        """Finger frame origin in the palm frame (3,) [m]."""
+        return self.palm_radius * np.array(
+            [math.cos(self.mount_angle), math.sin(self.mount_angle), 0.0])
+
+    @property
+    def quaternion(self):
+        """Rotation of the finger frame: the unit quaternion [x, y, z, w] with w >= 0."""
+        return _quaternion(self.rotation)
+
+    def to_palm(self, points):
+        """
+        Map finger-frame midplane points to the palm frame.
+
+        Parameters
+        ----------
+        points : array_like, shape (M, 2)
+            (X, Z) in the finger frame [m]; Y is 0 on the midplane.
+
+        Returns
+        -------
+        ndarray, shape (M, 3)
+            (x, y, z) in the palm frame [m].
+
+        """
+        xz = np.asarray(points, dtype=float).reshape(-1, 2)
+        xyz = np.column_stack([xz[:, 0], np.zeros(len(xz)), xz[:, 1]])
+        return xyz @ self.rotation.T + self.translation
+
+
+def _quaternion(rotation):
+    """Return the unit quaternion (x, y, z, w), w >= 0, of a rotation matrix (Shepperd)."""
+    m = rotation
+    trace = m[0, 0] + m[1, 1] + m[2, 2]
+    k = int(np.argmax([trace, m[0, 0], m[1, 1], m[2, 2]]))
+    if k == 0:
+        w = 0.5 * math.sqrt(1.0 + trace)
+        q = ((m[2, 1] - m[1, 2]) / (4 * w), (m[0, 2] - m[2, 0]) / (4 * w),
+             (m[1, 0] - m[0, 1]) / (4 * w), w)
+    else:
+        i, j, n = k - 1, k % 3, (k + 1) % 3
+        r = 0.5 * math.sqrt(1.0 + m[i, i] - m[j, j] - m[n, n])
+        q = [0.0, 0.0, 0.0, (m[n, j] - m[j, n]) / (4 * r)]
+        q[i] = r
+        q[j] = (m[j, i] + m[i, j]) / (4 * r)
+        q[n] = (m[n, i] + m[i, n]) / (4 * r)
+    q = np.array(q)
+    return q if q[3] >= 0.0 else -q
+
+
+def palm_transform(placement, palm_frame, finger_frame, stamp_ns=0):
+    """
+    Build the static transform palm -> finger of a finger placement, as tf2 broadcasts it.
+
+    Parameters
+    ----------
+    placement : FingerPlacement
+        The finger's clamp.
+    palm_frame, finger_frame : str
+        Parent and child frame ids.
+    stamp_ns : int
+        Header stamp [ns].
+
+    Returns
+    -------
+    geometry_msgs.msg.TransformStamped
+        Maps finger-frame coordinates to palm-frame ones.
+
+    """
+    msg = TransformStamped()
+    msg.header.stamp = ns_to_time(stamp_ns)
+    msg.header.frame_id = palm_frame
+    msg.child_frame_id = finger_frame
+    t = msg.transform.translation
+    t.x, t.y, t.z = (float(v) for v in placement.translation)
+    r = msg.transform.rotation
+    r.x, r.y, r.z, r.w = (float(v) for v in placement.quaternion)
+    return msg
+
+
+def _marker(frame_id, stamp_ns, namespace, marker_id, kind, color, scale):
+    marker = Marker()
+    marker.header.stamp = ns_to_time(stamp_ns)
+    marker.header.frame_id = frame_id
+    marker.ns = namespace
+    marker.id = int(marker_id)
+    marker.type = kind
+    marker.action = Marker.ADD
+    marker.pose.orientation.w = 1.0
+    marker.scale.x = marker.scale.y = marker.scale.z = float(scale)
+    marker.color = ColorRGBA(r=float(color[0]), g=float(color[1]), b=float(color[2]),
+                             a=float(color[3]))
+    marker.frame_locked = True
+    return marker
+
+
+def _points(xyz):
+    return [Point(x=x, y=y, z=z) for x, y, z in np.asarray(xyz, dtype=float).tolist()]
+
+
 def shape_marker(result, frame_id, stamp_ns, marker_id, color=(0.1, 0.7, 0.2, 1.0),
-                 width=0.002):
+                 width=0.002, placement=None, namespace=SHAPE_MARKER_NAMESPACE):
     """
     Build a LINE_STRIP marker of a finger's midplane for RViz or Foxglove.
 
@@ -355,15 +492,19 @@ def shape_marker(result, frame_id, stamp_ns, marker_id, color=(0.1, 0.7, 0.2, 1.
     result : CCMResult
         Uses ``points`` (M, 2) [m], drawn at (X, 0, Z) in the finger frame.
     frame_id : str
-        Finger frame, ``finger_<i>``.
+        The finger frame, or the palm frame when `placement` is given.
     stamp_ns : int
         Header stamp [ns].
     marker_id : int
-        Marker id within `SHAPE_MARKER_NAMESPACE`, the finger index.
+        Marker id within `namespace`, the finger index.
     color : (float, float, float, float)
         RGBA in [0, 1].
     width : float
         Line width [m].
+    placement : FingerPlacement, optional
+        Draw the midplane in the palm frame, the finger placed by its clamp.
+    namespace : str
+        Marker namespace.
 
     Returns
     -------
@@ -371,18 +512,66 @@ def shape_marker(result, frame_id, stamp_ns, marker_id, color=(0.1, 0.7, 0.2, 1.
         Frame-locked, no lifetime, identity pose.
 
     """
-    marker = Marker()
-    marker.header.stamp = ns_to_time(stamp_ns)
-    marker.header.frame_id = frame_id
-    marker.ns = SHAPE_MARKER_NAMESPACE
-    marker.id = int(marker_id)
-    marker.type = Marker.LINE_STRIP
-    marker.action = Marker.ADD
-    marker.pose.orientation.w = 1.0
-    marker.scale.x = float(width)
-    marker.color = ColorRGBA(r=float(color[0]), g=float(color[1]), b=float(color[2]),
-                             a=float(color[3]))
-    marker.frame_locked = True
-    marker.points = [Point(x=x, z=z)
-                     for x, z in np.asarray(result.points, dtype=float).tolist()]
+    marker = _marker(frame_id, stamp_ns, namespace, marker_id, Marker.LINE_STRIP, color,
+                     width)
+    xz = np.asarray(result.points, dtype=float)
+    if placement is None:
+        marker.points = [Point(x=x, z=z) for x, z in xz.tolist()]
+    else:
+        marker.points = _points(placement.to_palm(xz))
     return marker
+
+
+def gripper_shape_markers(fingers, palm_frame, width=0.002, tip_diameter=0.006):
+    """
+    Build the ``gripper_shape`` markers: every finger's midplane, tip and fitted circle.
+
+    All are in the palm frame, each finger placed by its clamp, so that a viewer with
+    the palm as fixed frame shows the whole gripper without tf.
+
+    Parameters
+    ----------
+    fingers : iterable of tuple
+        ``(index, result, stamp_ns, placement, color)`` of every finger with a state:
+        ``result.points`` (M, 2) [m] and ``result.curvature`` [1/m].
+    palm_frame : str
+        Frame id of the palm.
+    width : float
+        Line width [m].
+    tip_diameter : float
+        Diameter of the tip spheres [m].
+
+    Returns
+    -------
+    list of visualization_msgs.msg.Marker
+        Per finger, in the namespaces of `GRIPPER_SHAPE_NAMESPACES` with the finger index
+        as id: a LINE_STRIP midplane, a SPHERE at the tip, and a LINE_STRIP of the fitted
+        circle (in the finger's plane), or a DELETE of it when the circle is larger than
+        `MAX_CIRCLE_RADIUS` or undefined (a flat finger).
+
+    """
+    # The model core (numba) loads only where circles are drawn, not with every fpc-mcap.
+    from ..model.analysis import fit_circle
+
+    names = GRIPPER_SHAPE_NAMESPACES
+    out = []
+    for index, result, stamp_ns, placement, color in fingers:
+        out.append(shape_marker(result, palm_frame, stamp_ns, index, color=color, width=width,
+                                placement=placement, namespace=names['midplane']))
+        tip = _marker(palm_frame, stamp_ns, names['tip'], index, Marker.SPHERE, color,
+                      tip_diameter)
+        x, y, z = placement.to_palm(np.asarray(result.points, dtype=float)[-1:])[0].tolist()
+        tip.pose.position = Point(x=x, y=y, z=z)
+        out.append(tip)
+        circle = _marker(palm_frame, stamp_ns, names['circle'], index, Marker.LINE_STRIP,
+                         (0.2, 0.4, 1.0, 0.6), 0.5 * width)
+        fit = fit_circle(result.points)
+        radius = abs(1.0 / fit.curvature) if fit.curvature else math.inf
+        if np.all(np.isfinite(fit.center)) and radius <= MAX_CIRCLE_RADIUS:
+            angle = np.linspace(0.0, 2.0 * math.pi, _CIRCLE_POINTS)
+            ring = fit.center + radius * np.column_stack([np.cos(angle), np.sin(angle)])
+            circle.points = _points(placement.to_palm(ring))
+        else:
+            circle.action = Marker.DELETE
+        out.append(circle)
+    return out

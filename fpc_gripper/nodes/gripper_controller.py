@@ -31,10 +31,6 @@ from diagnostic_msgs.msg import KeyValue
 from geometry_msgs.msg import WrenchStamped
 from rcl_interfaces.msg import ParameterDescriptor
 from rcl_interfaces.msg import SetParametersResult
-import rclpy
-from rclpy.exceptions import ParameterException
-from rclpy.executors import ExternalShutdownException
-from rclpy.logging import get_logger
 from rclpy.node import Node
 from rclpy.qos import HistoryPolicy
 from rclpy.qos import qos_profile_sensor_data
@@ -58,6 +54,7 @@ from fpc_gripper.model.pipeline import ModelSettings
 from fpc_gripper.nodes.parameters import declare_table
 from fpc_gripper.nodes.parameters import float_range
 from fpc_gripper.nodes.parameters import int_range
+from fpc_gripper.nodes.runner import run_node
 
 __all__ = ['GripperController', 'main']
 
@@ -130,6 +127,8 @@ def _parameter_table(config_max_pressure):
         ('atmospheric_pressure', 101325.0,
          'Atmospheric pressure [Pa]: absolute = gauge + atmospheric_pressure.',
          {'floating_point_range': float_range(3.0e4, 1.2e5)}),
+        ('frame_prefix', '', 'Prefix of the finger frames (<prefix>finger_<i>) of the '
+         "commands and of the tip forces accepted, as model_node's.", {'read_only': True}),
     )
 
 
@@ -163,6 +162,8 @@ class GripperController(Node):
         if not result.successful:
             raise ValueError(result.reason)
         self._names = config.names
+        self._frames = tuple(self.get_parameter('frame_prefix').value + name
+                             for name in self._names)
         settings = ModelSettings(tolerance=self.get_parameter('tolerance').value,
                                  n_segments=self.get_parameter('n_segments').value,
                                  pressure_model=self.get_parameter('pressure_model').value)
@@ -287,10 +288,10 @@ class GripperController(Node):
     def _on_tip_force(self, index, msg):
         name = self._names[index]
         force = msg.wrench.force
-        if msg.header.frame_id not in ('', name):
+        if msg.header.frame_id not in ('', self._frames[index]):
             self.get_logger().warning(
-                f'{name}/tip_force ignored: frame {msg.header.frame_id!r} is not {name!r}',
-                throttle_duration_sec=_THROTTLE_S)
+                f'{name}/tip_force ignored: frame {msg.header.frame_id!r} is not '
+                f'{self._frames[index]!r}', throttle_duration_sec=_THROTTLE_S)
             return
         if not (math.isfinite(force.x) and math.isfinite(force.z)):
             self.get_logger().warning(f'{name}/tip_force ignored: not finite',
@@ -330,7 +331,7 @@ class GripperController(Node):
             for i, command in enumerate(out.commands):
                 msg = FluidPressure()
                 msg.header.stamp = stamp
-                msg.header.frame_id = self._names[i]
+                msg.header.frame_id = self._frames[i]
                 gauge = min(max(command, 0.0), ceiling)
                 self._max_command = max(self._max_command, gauge)
                 msg.fluid_pressure = gauge + atmospheric
@@ -384,22 +385,8 @@ class GripperController(Node):
 
 
 def main(args=None):
-    """Run the controller until shutdown."""
-    rclpy.init(args=args)
-    try:
-        node = GripperController()
-    except (ValueError, ParameterException) as exc:
-        get_logger('gripper_controller').fatal(f'cannot start: {exc}')
-        rclpy.try_shutdown()
-        return 1
-    try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    """Run the controller until SIGINT or SIGTERM: 0 then, 1 when it cannot start."""
+    return run_node(GripperController, 'gripper_controller', args)
 
 
 if __name__ == '__main__':

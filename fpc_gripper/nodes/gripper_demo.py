@@ -356,15 +356,16 @@ def run_session(output_dir, object_diameter=0.040, grasp_force=0.5, open_apertur
             **common))
         # Default model settings throughout: the model node, the controller's inverse and
         # the virtual object all compute the finger through the same pipeline.
+        # No rigidity: K_x and K_z take two more solves per new pressure, and the session
+        # does not use them.
         nodes.append(ModelNode(parameter_overrides=[
             cfg, Parameter('pressure_input', value='measured'),
-            Parameter('max_rate_hz', value=10.0)], **common))
+            Parameter('max_rate_hz', value=10.0), Parameter('rigidity_rate_hz', value=0.0)],
+            **common))
         nodes.append(GripperController(parameter_overrides=[cfg], **common))
         virtual = VirtualObjectNode(parameter_overrides=[
             cfg, Parameter('object_diameter', value=float(object_diameter))], **common)
         nodes.append(virtual)
-        # Not rigidity: subscribing would make the model node compute K_x and K_z on
-        # every solve, which is not part of the session.
         topics = [t for t in gripper_topics(config.names) if not t.endswith('/rigidity')]
         recorder = McapRecorder(parameter_overrides=[
             Parameter('output_path', value=str(mcap_path)), Parameter('overwrite', value=True),

@@ -8,12 +8,11 @@ import time
 
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 import rclpy
-from rclpy.exceptions import ParameterException
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from .parameters import float_range
+from .runner import run_node
 from ..io.mcap_writer import (normalize_type_name, Rosbag2McapWriter, SchemaNotFoundError,
                               type_description_hash)
 from ..io.messages import gripper_topics
@@ -74,7 +73,8 @@ class McapRecorder(Node):
     Topics without a publisher yet are looked for again every ``discovery_period_s``.
     Every ``flush_period_s / 2`` the open chunk is closed and written with its index and
     the file is fsync'ed, so a ``kill -9`` loses at most the last ``flush_period_s`` of
-    messages. Destroying the node (SIGINT, SIGTERM) writes the summary and index.
+    messages. Destroying the node (`main` does on SIGINT and SIGTERM, once or repeated)
+    writes the summary and index.
     """
 
     def __init__(self, **kwargs):
@@ -307,21 +307,7 @@ def _cdr_header_stamp(data):
 
 def main(args=None):
     """Run the recorder until SIGINT or SIGTERM, then close the file with its index."""
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = McapRecorder()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except (OSError, ValueError, ParameterException) as error:
-        print(f'mcap_recorder: error: {error}', file=sys.stderr)
-        return 1
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    return run_node(McapRecorder, 'mcap_recorder', args)
 
 
 if __name__ == '__main__':

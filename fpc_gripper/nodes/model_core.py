@@ -207,6 +207,8 @@ class FingerState:
         Newest accepted (f0, p0) [N].
     stamp_ns : int
         Stamp given to the next update [ns]: the newest accepted input's, else its arrival.
+    has_pressure : bool
+        A pressure was accepted; until then the finger is waiting and solves nothing.
     pending : bool
         Accepted input not yet solved.
     result : CCMResult or None
@@ -231,7 +233,8 @@ class FingerState:
     gauge: float = 0.0
     tip_force: tuple = (0.0, 0.0)
     stamp_ns: int = 0
-    pending: bool = True
+    has_pressure: bool = False
+    pending: bool = False
     result: object = None
     result_key: tuple = None
     result_stamp_ns: int = 0
@@ -254,6 +257,11 @@ class FingerState:
     def key(self):
         """Identity of the current input: (solver, gauge [Pa], f0 [N], p0 [N])."""
         return (self.solver, self.gauge) + tuple(self.tip_force)
+
+    @property
+    def ready(self):
+        """Input waits to be solved: something new since the last solve, and a pressure."""
+        return self.pending and self.has_pressure
 
 
 @dataclasses.dataclass(frozen=True)
@@ -310,7 +318,8 @@ class ModelCore:
     solver (same design and settings), gauge pressure and tip force share one solve, a
     finger whose input equals a state some finger already holds reuses that state, and
     every solve is warm-started from the finger's last good result. A failed solve keeps
-    the last good state. Solve rate is limited per finger by a token bucket.
+    the last good state. Solve rate is limited per finger by a token bucket. A finger
+    solves nothing before its first accepted pressure: no state answers no input.
 
     Parameters
     ----------
@@ -328,6 +337,8 @@ class ModelCore:
         Largest accepted age of a header stamp [s]; 0 disables.
     max_rate_hz : float
         Sustained solve-rate cap per finger [Hz].
+    frame_prefix : str
+        A tip force must be in the frame ``frame_prefix + name`` of its finger.
     timer : callable
         Monotonic seconds for solve timing.
 
@@ -335,7 +346,7 @@ class ModelCore:
 
     def __init__(self, fingers, solver_factory, *, max_pressure=math.inf,
                  atmospheric_pressure=101325.0, stale_after_s=0.0, max_rate_hz=200.0,
-                 timer=time.perf_counter):
+                 frame_prefix='', timer=time.perf_counter):
         self._states = tuple(
             FingerState(name=name, design=design,
                         max_pressure=min(float(design.max_pressure), float(max_pressure)))
@@ -343,6 +354,7 @@ class ModelCore:
         if not self._states:
             raise ValueError('`fingers` must name at least one finger, got none')
         self._names = tuple(s.name for s in self._states)
+        self._frame_prefix = str(frame_prefix)
         self.atmospheric_pressure = atmospheric_pressure
         self.stale_after_s = stale_after_s
         self.max_rate_hz = max_rate_hz
@@ -398,7 +410,8 @@ class ModelCore:
         Build new solvers (one per distinct design) and mark every finger pending.
 
         The last good states stay published until the new solves succeed; they warm-start
-        nothing, since their segmentation may differ.
+        nothing, since their segmentation may differ. Fingers still waiting for a pressure
+        stay waiting.
 
         Parameters
         ----------
@@ -414,6 +427,31 @@ class ModelCore:
             state.pending = True
             state.failed = None
         self._rigidity.clear()
+
+    def warm_up(self, rigidity=True):
+        """
+        Solve the rest state once per solver, and throw the answers away.
+
+        The first solve of a process loads (or, the first time ever, compiles) the
+        solver's kernels; done here, at start-up, the first input is answered at once.
+        Solvers are pure functions of their inputs, so this changes no later answer, and
+        no finger state is touched: nothing is published for it.
+
+        Parameters
+        ----------
+        rigidity : bool
+            Also one rigidity computation (the bordered system's kernels).
+
+        """
+        for solver in {id(s.solver): s.solver for s in self._states}.values():
+            try:
+                rest = solver.solve(0.0, (0.0, 0.0))
+                if rigidity:
+                    solver.rigidity(0.0, axis='x', displacement=RIGIDITY_DISPLACEMENT,
+                                    initial=rest)
+            except _SOLVER_ERRORS:
+                # The first real solve reports it.
+                pass
 
     # -- inputs -----------------------------------------------------------------------------
 
@@ -446,6 +484,7 @@ class ModelCore:
         if self._record(state, check, source, stamp_ns, now_ns):
             state.gauge = check.value
             state.clamped += check.clamped
+            state.has_pressure = True
         return check
 
     def offer_tip_force(self, index, f0, p0, frame_id, stamp_ns=0, now_ns=0,
@@ -460,7 +499,7 @@ class ModelCore:
         f0, p0 : float
             Force along the finger's X and Z [N].
         frame_id : str
-            Header frame; must be the finger's name.
+            Header frame; must be the finger's frame, ``frame_prefix + name``.
         stamp_ns : int
             Header stamp [ns]; 0 when unstamped.
         now_ns : int
@@ -474,7 +513,8 @@ class ModelCore:
 
         """
         state = self._states[index]
-        check = check_tip_force(f0, p0, frame_id, expected_frame=state.name,
+        check = check_tip_force(f0, p0, frame_id,
+                                expected_frame=self._frame_prefix + state.name,
                                 stamp_ns=stamp_ns, now_ns=now_ns,
                                 stale_after_s=self._stale_after_s)
         if self._record(state, check, source, stamp_ns, now_ns):
@@ -488,7 +528,7 @@ class ModelCore:
             state.rejected += 1
             return False
         state.rejection = None
-        state.coalesced += state.pending
+        state.coalesced += state.ready
         state.pending = True
         state.stamp_ns = int(stamp_ns) if stamp_ns else int(now_ns)
         return True
@@ -503,7 +543,7 @@ class ModelCore:
 
     def ready(self, now_ns):
         """
-        Return the indices of the fingers with pending input and solve budget left.
+        Return the indices of the fingers with input to solve and solve budget left.
 
         Parameters
         ----------
@@ -517,7 +557,7 @@ class ModelCore:
         """
         out = []
         for i, state in enumerate(self._states):
-            if state.pending:
+            if state.ready:
                 self._refill(state, now_ns)
                 if state.tokens >= 1.0 - _TOKEN_SLACK:
                     out.append(i)
@@ -525,8 +565,8 @@ class ModelCore:
 
     @property
     def pending(self):
-        """True while any finger has input waiting."""
-        return any(s.pending for s in self._states)
+        """True while any finger has input to solve."""
+        return any(s.ready for s in self._states)
 
     def process(self, indices, now_ns):
         """
@@ -538,7 +578,8 @@ class ModelCore:
         Parameters
         ----------
         indices : iterable of int
-            Fingers to process; those without pending input are skipped.
+            Fingers to process; those without input to solve (nothing new, or no pressure
+            yet) are skipped.
         now_ns : int
             Time for the rate budget [ns].
 
@@ -551,7 +592,7 @@ class ModelCore:
         groups = {}
         for i in indices:
             state = self._states[i]
-            if not state.pending:
+            if not state.ready:
                 continue
             self._refill(state, now_ns)
             state.tokens -= 1.0
@@ -663,9 +704,9 @@ class ModelCore:
         """
         Level of a finger and the kind of its problem, without derived values (cheap).
 
-        ERROR while the newest input's solve failed, WARN after a rejected input (until
-        the next accepted one) or while the published state breaks the small-rotation
-        rule (valid=False), OK otherwise.
+        ERROR while the newest input's solve failed, WARN while waiting for the first
+        pressure, after a rejected input (until the next accepted one) or while the
+        published state breaks the small-rotation rule (valid=False), OK otherwise.
 
         Parameters
         ----------
@@ -675,20 +716,21 @@ class ModelCore:
         Returns
         -------
         tuple
-            ``(level, failed, rejection, valid)``: it changes when the kind of problem
-            changes, not when only its values do.
+            ``(level, failed, rejection, valid, waiting)``: it changes when the kind of
+            problem changes, not when only its values do.
 
         """
         state = self._states[index]
         valid = None if state.result is None else bool(state.result.valid)
         failed = state.failure is not None
+        waiting = not state.has_pressure
         if failed:
             level = Level.ERROR
-        elif state.rejection is not None or valid is False:
+        elif state.rejection is not None or valid is False or waiting:
             level = Level.WARN
         else:
             level = Level.OK
-        return level, failed, state.rejection, valid
+        return level, failed, state.rejection, valid, waiting
 
     def status(self, index):
         """
@@ -707,15 +749,17 @@ class ModelCore:
         """
         state = self._states[index]
         result = state.result
-        level, failed, rejection, valid = self.health(index)
+        level, failed, rejection, valid, waiting = self.health(index)
         parts = []
+        if waiting:
+            parts.append('waiting for pressure input')
         if failed:
             parts.append(f'solver failed, keeping the last good state: {state.failure}')
         if rejection is not None:
             parts.append(f'rejected {state.last_rejection}')
         if valid is False:
             parts.append('state breaks the small-rotation rule (valid=False)')
-        if result is None and state.failure is None:
+        if result is None and state.failure is None and not waiting:
             parts.append('no state yet')
         message = '; '.join(parts) if parts else 'ok'
         pressure = 'none' if result is None else f'{state.result_key[1]:.1f}'

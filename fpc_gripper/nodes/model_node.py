@@ -2,6 +2,7 @@
 
 import functools
 import math
+import sys
 import threading
 import time
 
@@ -12,14 +13,10 @@ from geometry_msgs.msg import Vector3Stamped
 from geometry_msgs.msg import WrenchStamped
 from nav_msgs.msg import Path
 from rcl_interfaces.msg import SetParametersResult
-import rclpy
 from rclpy.clock import Clock
 from rclpy.clock import ClockType
-from rclpy.event_handler import PublisherEventCallbacks
-from rclpy.exceptions import ParameterException
-from rclpy.executors import ExternalShutdownException
-from rclpy.logging import get_logger
 from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy
 from rclpy.qos import HistoryPolicy
 from rclpy.qos import qos_profile_sensor_data
 from rclpy.qos import QoSProfile
@@ -32,7 +29,10 @@ from visualization_msgs.msg import MarkerArray
 from fpc_gripper.io.config import default_gripper_config_path
 from fpc_gripper.io.config import load_gripper_config
 from fpc_gripper.io.messages import curvature_message
+from fpc_gripper.io.messages import FingerPlacement
+from fpc_gripper.io.messages import gripper_shape_markers
 from fpc_gripper.io.messages import ns_to_time
+from fpc_gripper.io.messages import palm_transform
 from fpc_gripper.io.messages import rigidity_message
 from fpc_gripper.io.messages import serialized_shape
 from fpc_gripper.io.messages import shape_marker
@@ -48,6 +48,7 @@ from fpc_gripper.nodes.model_core import ModelCore
 from fpc_gripper.nodes.parameters import declare_table
 from fpc_gripper.nodes.parameters import float_range
 from fpc_gripper.nodes.parameters import int_range
+from fpc_gripper.nodes.runner import run_node
 
 PRESSURE_INPUTS = ('command', 'measured')
 # The model settings every consumer of the finger pipeline defaults to.
@@ -56,15 +57,22 @@ _CHOICES = {'pressure_model': PRESSURE_MODEL_NAMES, 'pressure_input': PRESSURE_I
 # Parameters whose change rebuilds the solvers.
 _SOLVER_PARAMETERS = ('n_segments', 'pressure_model', 'tolerance')
 
-_OUTPUT_QOS = QoSProfile(depth=10, history=HistoryPolicy.KEEP_LAST,
-                         reliability=ReliabilityPolicy.RELIABLE)
-_COMMAND_QOS = _OUTPUT_QOS
+# The model's state: a late joiner gets the newest one from the publisher's history.
+STATE_QOS = QoSProfile(depth=1, history=HistoryPolicy.KEEP_LAST,
+                       reliability=ReliabilityPolicy.RELIABLE,
+                       durability=DurabilityPolicy.TRANSIENT_LOCAL)
+_COMMAND_QOS = QoSProfile(depth=10, history=HistoryPolicy.KEEP_LAST,
+                          reliability=ReliabilityPolicy.RELIABLE)
+_DIAGNOSTICS_QOS = _COMMAND_QOS
 _THROTTLE_S = 2.0
 _DIAGNOSTICS_PERIOD_S = 1.0
 # Slow outputs, at most once per period and the last update always sent: markers are for
 # people, and rigidity (two displacement-controlled solves) must not hold up the shapes [s].
 _MARKER_PERIOD_S = 1.0 / 30.0
-_RIGIDITY_PERIOD_S = 0.1
+# Markers cost some 8 ms a send (Python message objects, circle fits): with nobody
+# watching, the newest state still reaches the transient-local history, but at 1 Hz.
+_UNWATCHED_MARKER_PERIOD_S = 1.0
+_PALM_FRAME = 'palm'
 _LEVELS = {Level.OK: DiagnosticStatus.OK, Level.WARN: DiagnosticStatus.WARN,
            Level.ERROR: DiagnosticStatus.ERROR}
 _VALID_COLOR = (0.1, 0.7, 0.2, 1.0)
@@ -72,17 +80,17 @@ _INVALID_COLOR = (1.0, 0.55, 0.0, 1.0)
 
 
 class _SlowOutput:
-    """Fingers whose slow output is out of date, sent at most once per period."""
+    """Fingers whose slow output is out of date, sent at most once per `period_s` [s]."""
 
     def __init__(self, period_s, publish):
-        self.period_ns = int(period_s * 1e9)
+        self.period_s = period_s
         self.publish = publish
         self.dirty = set()
         self.last_ns = None
 
     def due(self, now_ns):
         """Whether a period has passed since the last send [ns]."""
-        return self.last_ns is None or now_ns - self.last_ns >= self.period_ns
+        return self.last_ns is None or (now_ns - self.last_ns) * 1e-9 >= self.period_s
 
     def take(self, now_ns):
         """Mark a send at `now_ns` [ns] and return the out-of-date finger indices."""
@@ -125,25 +133,38 @@ def _parameter_table():
          'Inputs whose header stamp is older than this against the node clock are rejected '
          '[s]; 0 disables. Unstamped (zero) headers are never stale.',
          {'floating_point_range': float_range(0.0, 3600.0)}),
+        ('rigidity_rate_hz', 10.0,
+         "Largest rate of each finger's rigidity output [Hz]: K_x and K_z take two "
+         "displacement-controlled solves at the state's pressure; 0 publishes none.",
+         {'floating_point_range': float_range(0.0, 100.0)}),
+        ('frame_prefix', '',
+         'Prefix of every frame id published or expected (<prefix>palm, <prefix>finger_<i>), '
+         'so that two grippers can share a tf tree, e.g. "left/".',
+         {'read_only': True}),
     )
 
 
 class ModelNode(Node):
     """
-    Publish the CCM equilibrium of every finger of a gripper as its inputs change.
+    Publish the CCM equilibrium of every finger of a gripper in answer to its inputs.
 
     Per finger ``finger_<i>`` of the gripper config it subscribes ``pressure_command`` (or
     ``pressure`` with ``pressure_input:=measured``; absolute [Pa]) and ``tip_force``
-    (frame ``finger_<i>``, force.x = f0, force.z = p0 [N]) and publishes ``shape``
-    (nav_msgs/Path) and, computed only while someone listens, ``curvature``
-    (std_msgs/Float64, [1/m]) and ``rigidity`` (x = K_x, z = K_z [N·m²], at most 10 Hz);
-    plus ``markers`` (at most 30 Hz, while someone listens) and ``/diagnostics`` (1 Hz and on
-    every change of a finger's level or kind of problem).
+    (frame ``<frame_prefix>finger_<i>``, force.x = f0, force.z = p0 [N]) and publishes
+    ``shape`` (nav_msgs/Path) and ``curvature`` (std_msgs/Float64, [1/m]) for every
+    solved input, ``rigidity`` (x = K_x, z = K_z [N·m²], at most ``rigidity_rate_hz``),
+    and ``markers`` and ``gripper_shape`` (MarkerArray in the palm frame; at most 30 Hz
+    while subscribed, 1 Hz otherwise, the newest state always sent), plus
+    ``/diagnostics`` (1 Hz and on every change of a finger's level or kind of problem).
+    With tf2_ros importable it also broadcasts the static transforms palm -> finger_<i>.
 
-    Bad inputs are rejected and a failed solve publishes nothing: each finger keeps its
-    last good state (see :class:`~fpc_gripper.nodes.model_core.ModelCore`). Outputs carry
-    the header stamp of the input they answer (its arrival time when unstamped). A new
-    subscriber to an output is sent the current state at once.
+    Nothing is published for a finger before its first valid pressure (its diagnostics
+    say "waiting for pressure input" at WARN). Shape, curvature, rigidity and markers are
+    transient local with depth 1: a late subscriber gets the newest state from the
+    publisher's history, and every message answers an input. Bad inputs are rejected and
+    a failed solve publishes nothing: each finger keeps its last good state (see
+    :class:`~fpc_gripper.nodes.model_core.ModelCore`). Outputs carry the header stamp of
+    the input they answer (its arrival time when unstamped).
 
     Parameters
     ----------
@@ -192,20 +213,26 @@ class ModelNode(Node):
                 f'atmospheric_pressure parameter {param("atmospheric_pressure").value:.0f} Pa '
                 f'differs from the gripper config {config.atmospheric_pressure:.0f} Pa; '
                 'the parameter is used')
+        prefix = param('frame_prefix').value
         self._core = ModelCore(
             [(f.name, f.design) for f in config.fingers], self._create_solver,
             max_pressure=config.max_pressure,
             atmospheric_pressure=param('atmospheric_pressure').value,
             stale_after_s=param('stale_after_s').value,
-            max_rate_hz=param('max_rate_hz').value)
+            max_rate_hz=param('max_rate_hz').value, frame_prefix=prefix)
+        self._core.warm_up(rigidity=param('rigidity_rate_hz').value > 0.0)
         names = self._core.names
-        self._last_shape = [None] * len(names)
+        self._frames = tuple(prefix + name for name in names)
+        self._palm_frame = prefix + _PALM_FRAME
+        self._placements = tuple(FingerPlacement(config.palm_radius, f.mount_angle)
+                                 for f in config.fingers)
         self._markers = _SlowOutput(_MARKER_PERIOD_S, self._publish_markers)
-        self._rigidities = _SlowOutput(_RIGIDITY_PERIOD_S, self._publish_rigidities)
+        self._rigidities = _SlowOutput(self._rigidity_period(), self._publish_rigidities)
         self._last_kinds = None
         self._last_log = {}
         self._serialize_shapes = None
         self._create_topics(names)
+        self._tf = self._broadcast_palm_transforms()
         self._rate_timer = self.create_timer(1.0 / param('max_rate_hz').value, self._on_timer,
                                              clock=self._steady)
         self._rate_timer.cancel()
@@ -218,9 +245,11 @@ class ModelNode(Node):
             f'ready: {len(names)} fingers ({", ".join(names)}), tolerance '
             f'{param("tolerance").value} m, n_segments {param("n_segments").value}, '
             f'{param("pressure_model").value} pressure model, '
-            f'input {self._pressure_topic}, max_rate_hz {param("max_rate_hz").value:g}')
-        with self._lock:
-            self._run(range(len(names)))
+            f'input {self._pressure_topic}, max_rate_hz {param("max_rate_hz").value:g}, '
+            f'frames {self._palm_frame} -> {", ".join(self._frames)} '
+            f'({"static tf broadcast" if self._tf else "tf2_ros not importable: no tf"}); '
+            'waiting for pressure input')
+        self._publish_diagnostics(force=True)
 
     # -- public helpers ---------------------------------------------------------------------
 
@@ -233,6 +262,21 @@ class ModelNode(Node):
     def finger_names(self):
         """Finger names of the gripper config, in index order."""
         return self._core.names
+
+    @property
+    def palm_frame(self):
+        """Frame id of the palm, ``<frame_prefix>palm``."""
+        return self._palm_frame
+
+    @property
+    def finger_frames(self):
+        """Frame id of every finger, ``<frame_prefix><finger name>``, in index order."""
+        return self._frames
+
+    @property
+    def placements(self):
+        """Clamp of every finger on the palm (FingerPlacement), in index order."""
+        return self._placements
 
     def settings(self):
         """Return the :class:`~fpc_gripper.model.pipeline.ModelSettings` of the parameters."""
@@ -248,26 +292,18 @@ class ModelNode(Node):
     # -- set-up -----------------------------------------------------------------------------
 
     def _create_topics(self, names):
-        def matched(kind, index=None):
-            return PublisherEventCallbacks(
-                matched=functools.partial(self._on_matched, kind, index))
-
-        self._shape_pubs = tuple(
-            self.create_publisher(Path, f'{name}/shape', _OUTPUT_QOS,
-                                  event_callbacks=matched('shape', i))
-            for i, name in enumerate(names))
+        self._shape_pubs = tuple(self.create_publisher(Path, f'{name}/shape', STATE_QOS)
+                                 for name in names)
         self._curvature_pubs = tuple(
-            self.create_publisher(Float64, f'{name}/curvature', _OUTPUT_QOS,
-                                  event_callbacks=matched('curvature', i))
-            for i, name in enumerate(names))
+            self.create_publisher(Float64, f'{name}/curvature', STATE_QOS) for name in names)
         self._rigidity_pubs = tuple(
-            self.create_publisher(Vector3Stamped, f'{name}/rigidity', _OUTPUT_QOS,
-                                  event_callbacks=matched('rigidity', i))
-            for i, name in enumerate(names))
-        self._markers_pub = self.create_publisher(MarkerArray, 'markers', _OUTPUT_QOS,
-                                                  event_callbacks=matched('markers'))
+            self.create_publisher(Vector3Stamped, f'{name}/rigidity', STATE_QOS)
+            for name in names)
+        self._markers_pub = self.create_publisher(MarkerArray, 'markers', STATE_QOS)
+        self._gripper_shape_pub = self.create_publisher(MarkerArray, 'gripper_shape',
+                                                        STATE_QOS)
         self._diagnostics_pub = self.create_publisher(DiagnosticArray, '/diagnostics',
-                                                      _OUTPUT_QOS)
+                                                      _DIAGNOSTICS_QOS)
         if self.get_parameter('pressure_input').value == 'measured':
             self._pressure_topic, qos = 'pressure', qos_profile_sensor_data
         else:
@@ -280,6 +316,23 @@ class ModelNode(Node):
             self.create_subscription(WrenchStamped, f'{name}/tip_force',
                                      functools.partial(self._on_tip_force, i), _COMMAND_QOS)
             for i, name in enumerate(names))
+
+    def _broadcast_palm_transforms(self):
+        """Send the static transforms palm -> finger_<i> if tf2_ros is importable."""
+        try:
+            from tf2_ros.static_transform_broadcaster import StaticTransformBroadcaster
+        except ImportError:
+            return None
+        broadcaster = StaticTransformBroadcaster(self)
+        stamp = self._now_ns()
+        broadcaster.sendTransform([
+            palm_transform(placement, self._palm_frame, frame, stamp)
+            for placement, frame in zip(self._placements, self._frames)])
+        return broadcaster
+
+    def _rigidity_period(self):
+        rate = self.get_parameter('rigidity_rate_hz').value
+        return 1.0 / rate if rate > 0.0 else math.inf
 
     # -- parameters -------------------------------------------------------------------------
 
@@ -306,6 +359,10 @@ class ModelNode(Node):
             if 'max_rate_hz' in values:
                 self._core.max_rate_hz = values['max_rate_hz']
                 self._rate_timer.timer_period_ns = int(round(1e9 / values['max_rate_hz']))
+            if 'rigidity_rate_hz' in values:
+                self._rigidities.period_s = self._rigidity_period()
+                if values['rigidity_rate_hz'] <= 0.0:
+                    self._rigidities.dirty.clear()
             if values.keys() & set(_SOLVER_PARAMETERS):
                 self._core.rebuild(self._create_solver)
                 self.get_logger().info(
@@ -368,10 +425,7 @@ class ModelNode(Node):
         for update in good:
             self._publish_shape(update)
         for update in good:
-            # The circle fit is the costliest step: only for listeners (a new one is
-            # sent the current value on matching).
-            if self._curvature_pubs[update.index].get_subscription_count():
-                self._curvature_pubs[update.index].publish(curvature_message(update.result))
+            self._curvature_pubs[update.index].publish(curvature_message(update.result))
         for update in updates:
             if update.result is None:
                 state = self._core.fingers[update.index]
@@ -381,10 +435,9 @@ class ModelNode(Node):
                     f'({state.tip_force[0]:g}, {state.tip_force[1]:g}) N failed, keeping the '
                     f'last good state: {update.failure}')
         self._publish_diagnostics()
-        if good and self._markers_pub.get_subscription_count():
-            self._markers.dirty.update(u.index for u in good)
-        self._rigidities.dirty.update(
-            u.index for u in good if self._rigidity_pubs[u.index].get_subscription_count())
+        self._markers.dirty.update(u.index for u in good)
+        if math.isfinite(self._rigidities.period_s):
+            self._rigidities.dirty.update(u.index for u in good)
         self._flush_slow_outputs()
 
     def _shape_payload(self, result, frame_id, stamp_ns):
@@ -401,18 +454,20 @@ class ModelNode(Node):
         return shape_message(result, frame_id, stamp_ns)
 
     def _publish_shape(self, update):
-        name = self._core.names[update.index]
-        payload = self._shape_payload(update.result, name, update.stamp_ns)
-        self._last_shape[update.index] = payload
+        payload = self._shape_payload(update.result, self._frames[update.index],
+                                      update.stamp_ns)
         self._shape_pubs[update.index].publish(payload)
 
-    def _flush_slow_outputs(self, force=False):
-        """Send the slow outputs that are due (all when forced); wake the timer for the rest."""
+    def _flush_slow_outputs(self):
+        """Send the slow outputs that are due; wake the timer for the rest."""
         now = time.monotonic_ns()
+        watched = (self._markers_pub.get_subscription_count()
+                   or self._gripper_shape_pub.get_subscription_count())
+        self._markers.period_s = _MARKER_PERIOD_S if watched else _UNWATCHED_MARKER_PERIOD_S
         for slow in (self._markers, self._rigidities):
             if not slow.dirty:
                 continue
-            if force or slow.due(now):
+            if slow.due(now):
                 slow.publish(slow.take(now))
             else:
                 self._wake()
@@ -425,37 +480,22 @@ class ModelNode(Node):
             k_x = self._core.rigidity(index, 'x')
             k_z = self._core.rigidity(index, 'z')
             self._rigidity_pubs[index].publish(
-                rigidity_message(k_x, k_z, state.name, state.result_stamp_ns))
+                rigidity_message(k_x, k_z, self._frames[index], state.result_stamp_ns))
 
     def _publish_markers(self, indices):
-        markers = []
-        for index in indices:
-            state = self._core.fingers[index]
-            if state.result is None:
-                continue
-            color = _VALID_COLOR if state.result.valid else _INVALID_COLOR
-            markers.append(shape_marker(state.result, state.name, state.result_stamp_ns,
-                                        index, color=color))
-        if markers:
-            self._markers_pub.publish(MarkerArray(markers=markers))
-
-    def _on_matched(self, kind, index, info):
-        """Send the current state to a new subscriber (outputs are volatile)."""
-        if info.current_count_change <= 0:
+        """Send ``markers`` and ``gripper_shape`` with every finger that has a state."""
+        fingers = [
+            (i, state.result, state.result_stamp_ns, self._placements[i],
+             _VALID_COLOR if state.result.valid else _INVALID_COLOR)
+            for i, state in enumerate(self._core.fingers) if state.result is not None]
+        if not fingers:
             return
-        with self._lock:
-            if kind == 'markers':
-                self._markers.dirty.update(range(len(self._core.fingers)))
-                self._flush_slow_outputs(force=True)
-            elif kind == 'rigidity':
-                self._rigidities.dirty.add(index)
-                self._flush_slow_outputs(force=True)
-            elif kind == 'curvature':
-                result = self._core.fingers[index].result
-                if result is not None:
-                    self._curvature_pubs[index].publish(curvature_message(result))
-            elif self._last_shape[index] is not None:
-                self._shape_pubs[index].publish(self._last_shape[index])
+        palm = self._palm_frame
+        self._markers_pub.publish(MarkerArray(markers=[
+            shape_marker(result, palm, stamp, i, color=color, placement=placement)
+            for i, result, stamp, placement, color in fingers]))
+        self._gripper_shape_pub.publish(
+            MarkerArray(markers=gripper_shape_markers(fingers, palm)))
 
     def _publish_diagnostics(self, force=False):
         with self._lock:
@@ -484,27 +524,9 @@ class ModelNode(Node):
 
 
 def main(args=None):
-    """Run the model node until shutdown; 0 on SIGINT or shutdown, 1 on a bad start."""
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = ModelNode()
-        rclpy.spin(node)
-    except (ValueError, ParameterException) as exc:
-        get_logger('model_node').fatal(f'cannot start: {exc}')
-        return 1
-    except (KeyboardInterrupt, ExternalShutdownException):
-        # Also during start-up: a Ctrl-C while the node is being built is a clean stop.
-        pass
-    finally:
-        try:
-            if node is not None:
-                node.destroy_node()
-        except KeyboardInterrupt:
-            pass
-        rclpy.try_shutdown()
-    return 0
+    """Run the model node until SIGINT or SIGTERM: 0 then, 1 when it cannot start."""
+    return run_node(ModelNode, 'model_node', args)
 
 
 if __name__ == '__main__':
-    main()
+    sys.exit(main())

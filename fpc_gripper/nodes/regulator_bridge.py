@@ -2,13 +2,12 @@
 
 import functools
 import math
+import sys
 
 from diagnostic_msgs.msg import DiagnosticArray
 from diagnostic_msgs.msg import DiagnosticStatus
 from diagnostic_msgs.msg import KeyValue
 from rcl_interfaces.msg import SetParametersResult
-import rclpy
-from rclpy.executors import ExternalShutdownException
 from rclpy.lifecycle import LifecycleNode
 from rclpy.lifecycle import TransitionCallbackReturn
 from rclpy.qos import HistoryPolicy
@@ -23,6 +22,7 @@ from fpc_gripper.io.config import load_gripper_config
 from fpc_gripper.nodes.parameters import declare_table
 from fpc_gripper.nodes.parameters import float_range
 from fpc_gripper.nodes.parameters import int_range
+from fpc_gripper.nodes.runner import run_node
 from fpc_gripper.regulators.base import BackendFault
 from fpc_gripper.regulators.factory import BACKEND_KINDS
 from fpc_gripper.regulators.factory import make_backend
@@ -74,7 +74,11 @@ def _parameter_table():
         ('atmospheric_pressure', 101325.0,
          'Atmospheric pressure [Pa]: gauge = absolute - atmospheric_pressure.',
          {'floating_point_range': float_range(3.0e4, 1.2e5)}),
-        ('auto_activate', False, 'Configure and activate at start-up.', {'read_only': True}),
+        ('auto_activate', False, 'Configure and activate at start-up (main defaults it to '
+         'true; gripper.launch.py sets false and drives the transitions).',
+         {'read_only': True}),
+        ('frame_prefix', '', 'Prefix of the frame id of the published pressures '
+         "(<prefix>finger_<i>), as model_node's.", {'read_only': True}),
         ('sim_time_constant_s', 0.15, 'Simulated regulator first-order time constant [s].',
          {'floating_point_range': float_range(1.0e-3, 100.0)}),
         ('sim_slew_rate_pa_s', 2.0e6, 'Simulated regulator slew limit [Pa/s].',
@@ -334,6 +338,7 @@ class RegulatorBridge(LifecycleNode):
                 raise ValueError(result.reason)
         config = load_gripper_config(param('gripper_config').value)
         self._finger_names = tuple(f.name for f in config.fingers)
+        self._frames = tuple(param('frame_prefix').value + name for name in self._finger_names)
         n_channels = len(self._finger_names)
         self._config_max_pressure = float(config.max_pressure)
         if param('max_pressure').value > self._config_max_pressure:
@@ -491,7 +496,7 @@ class RegulatorBridge(LifecycleNode):
             self._measured[i] = value
             msg = FluidPressure()
             msg.header.stamp = stamp
-            msg.header.frame_id = self._finger_names[i]
+            msg.header.frame_id = self._frames[i]
             msg.fluid_pressure = value + atmospheric
             msg.variance = variance
             self._pressure_pubs[i].publish(msg)
@@ -570,17 +575,14 @@ class RegulatorBridge(LifecycleNode):
 
 
 def main(args=None):
-    """Run the bridge; it configures and activates itself unless auto_activate is false."""
-    rclpy.init(args=args)
-    node = RegulatorBridge(auto_activate_default=True)
-    try:
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        node.destroy_node()
-        rclpy.try_shutdown()
+    """
+    Run the bridge until SIGINT or SIGTERM: 0 then, 1 when it cannot start.
+
+    It configures and activates itself unless ``auto_activate`` is false.
+    """
+    return run_node(functools.partial(RegulatorBridge, auto_activate_default=True),
+                    'regulator_bridge', args)
 
 
 if __name__ == '__main__':
-    main()
+    sys.exit(main())

@@ -2,10 +2,12 @@
 
 import csv
 import json
+import shutil
 
+from helpers import read_with_rosbags
 import matplotlib.image
 from mcap.writer import Writer
-from mcap_test_utils import FakeResult, samples
+from mcap_test_utils import assert_rosbags_reads, FakeResult, read_independently, samples
 import pytest
 from rclpy.serialization import serialize_message
 
@@ -19,9 +21,9 @@ TOPICS = ('finger_0/pressure_command', 'finger_0/pressure', 'finger_0/curvature'
           'finger_0/shape', '/diagnostics')
 
 
-def write_recording(path, n=40, period=50_000_000):
+def write_recording(path, n=40, period=50_000_000, **kwargs):
     """N samples of a few gripper topics at 20 Hz, plus curvature and shape of finger_1."""
-    with Rosbag2McapWriter(path, chunk_size=4096) as writer:
+    with Rosbag2McapWriter(path, chunk_size=4096, **kwargs) as writer:
         for topic in TOPICS:
             writer.add_topic('/' + topic.lstrip('/'), type_name_of(samples(0)[topic]))
         writer.add_topic('/finger_1/curvature', 'std_msgs/msg/Float64')
@@ -41,6 +43,14 @@ def write_recording(path, n=40, period=50_000_000):
 @pytest.fixture(scope='module')
 def recording(tmp_path_factory):
     return write_recording(tmp_path_factory.mktemp('rec') / 'rec.mcap')
+
+
+@pytest.fixture(scope='module')
+def bag_directory(tmp_path_factory):
+    """The same recording split every 0.5 s into a rosbag2 bag directory (4 files)."""
+    path = write_recording(tmp_path_factory.mktemp('bag') / 'rec', max_duration=500_000_000)
+    assert len(list(path.glob('rec_*.mcap'))) == 4 and (path / 'metadata.yaml').is_file()
+    return path
 
 
 def run(capsys, *argv):
@@ -149,7 +159,8 @@ def _commands(bad, out):
         'info': ['info', bad],
         'plot': ['plot', bad, out],
         'export-csv': ['export-csv', bad, out],
-        'replay-model': ['replay-model', bad, out / 'replayed.mcap', '--quiet'],
+        # --force: even allowed to replace it, a failed replay leaves the old output.
+        'replay-model': ['replay-model', bad, out / 'replayed.mcap', '--quiet', '--force'],
     }
 
 
@@ -205,7 +216,10 @@ def test_recover_truncated_file(capsys, recording, tmp_path):
     with McapFile(out) as f:
         assert 0 < f.message_count < 280
         logs = [m.log_time for m in f.messages(decode=False)]
+        count = f.message_count
     assert logs == sorted(logs)
+    # The embedded metadata names fixed.mcap, not the temporary file it was written as.
+    assert assert_rosbags_reads(out, tmp_path) == count
 
 
 def test_recover_skips_a_damaged_chunk(capsys, recording, tmp_path):
@@ -223,3 +237,83 @@ def test_recover_rejects_a_non_mcap_file(capsys, recording, tmp_path):
     code, _, err = run(capsys, 'recover', bad, tmp_path / 'out.mcap')
     assert code == 1 and 'not an MCAP file' in err
     assert not (tmp_path / 'out.mcap').exists()
+
+
+# -- exact times, bag directories, refusing to overwrite --------------------------------------
+
+def test_info_prints_exact_times(capsys, tmp_path):
+    path = tmp_path / 'times.mcap'
+    start, end = 1_700_000_000_123_456_789, 1_700_000_003_987_654_321
+    with Rosbag2McapWriter(path) as writer:
+        writer.add_topic('/aperture', 'std_msgs/msg/Float64')
+        for t in (start, end):
+            writer.write('/aperture', serialize_message(samples(0)['aperture']), t)
+    # A double holds ~16 digits: start * 1e-9 prints as 1700000000.123456717.
+    assert f'{start * 1e-9:.9f}' != '1700000000.123456789'
+    code, out, err = run(capsys, 'info', path)
+    assert code == 0, err
+    assert 'start:     1700000000.123456789 s' in out
+    assert 'end:       1700000003.987654321 s' in out
+    assert 'duration:  3.864197532 s' in out
+    code, out, _ = run(capsys, 'info', path, '--json')
+    info = json.loads(out)
+    assert (info['start_ns'], info['end_ns'], info['duration_ns']) == (
+        start, end, end - start)
+
+
+def test_every_command_reads_a_bag_directory_as_the_single_file(
+        capsys, recording, bag_directory, tmp_path):
+    code, out, err = run(capsys, 'info', bag_directory, '--json')
+    assert code == 0, err
+    split = json.loads(out)
+    code, out, _ = run(capsys, 'info', recording, '--json')
+    whole = json.loads(out)
+    assert len(split['files']) == 4 and split['chunk_count'] >= 4
+    for key in ('message_count', 'start_ns', 'end_ns', 'topics'):
+        assert split[key] == whole[key], key
+    code, out, _ = run(capsys, 'info', bag_directory)
+    assert 'bag:' in out and '(4 files: rec_0.mcap, rec_1.mcap, rec_2.mcap, rec_3.mcap)' in out
+    for source, name in ((recording, 'whole'), (bag_directory, 'split')):
+        assert run(capsys, 'export-csv', source, tmp_path / name)[0] == 0
+    for csv_file in sorted((tmp_path / 'whole').iterdir()):
+        assert (tmp_path / 'split' / csv_file.name).read_text() == csv_file.read_text()
+    code, _, err = run(capsys, 'plot', bag_directory, tmp_path / 'plots')
+    assert code == 0, err
+    assert sorted(p.name for p in (tmp_path / 'plots').iterdir()) == [
+        'curvature.png', 'pressure.png', 'shapes.png']
+    code, out, err = run(capsys, 'recover', bag_directory, tmp_path / 'joined.mcap')
+    assert code == 0, err
+    assert 'chunks of 4 files' in out
+    assert [m[:4] for m in read_independently(tmp_path / 'joined.mcap')] == \
+        [m[:4] for m in read_independently(recording)]
+    assert assert_rosbags_reads(tmp_path / 'joined.mcap', tmp_path) == 280
+
+
+def test_recover_a_crashed_bag_directory(capsys, bag_directory, tmp_path):
+    """A recorder killed mid-split leaves no metadata.yaml and a cut-off last file."""
+    crashed = tmp_path / 'crashed'
+    shutil.copytree(bag_directory, crashed)
+    (crashed / 'metadata.yaml').unlink()
+    last = crashed / 'rec_3.mcap'
+    last.write_bytes(last.read_bytes()[:int(last.stat().st_size * 0.6)])
+    code, out, err = run(capsys, 'recover', crashed, tmp_path / 'fixed.mcap')
+    assert code == 0, err
+    assert 'chunks of 4 files' in out and 'cut off' in out
+    fixed = read_with_rosbags(tmp_path / 'fixed.mcap')
+    complete = sum(len(read_with_rosbags(bag_directory / f'rec_{i}.mcap')) for i in range(3))
+    assert complete < len(fixed) < 280
+    logs = [log for _, _, log, _ in fixed]
+    assert logs == sorted(logs)
+
+
+def test_recover_refuses_an_existing_output_unless_forced(capsys, recording, tmp_path):
+    bad = _truncated(recording, tmp_path / 'cut.mcap')
+    out = tmp_path / 'fixed.mcap'
+    out.write_bytes(b'precious')
+    code, _, err = run(capsys, 'recover', bad, out)
+    assert code == 1 and 'exists' in err and '--force' in err
+    assert out.read_bytes() == b'precious'
+    assert sorted(p.name for p in tmp_path.iterdir()) == ['cut.mcap', 'fixed.mcap']
+    code, _, err = run(capsys, 'recover', bad, out, '--force')
+    assert code == 0, err
+    assert 0 < assert_rosbags_reads(out, tmp_path) < 280

@@ -2,7 +2,8 @@
 
 import time
 
-from mcap_test_utils import assert_same_fields, read_independently, samples, summary_of
+from mcap_test_utils import (assert_rosbags_reads, assert_same_fields, read_independently,
+                             samples, summary_of)
 import pytest
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
@@ -105,6 +106,7 @@ def test_every_message_type_round_trips(context, tmp_path):
     assert offered['/rt/finger_0/shape']['reliability'] == 'reliable'
     assert yaml.safe_load(metadata['rosbag2']['serialized_metadata'])['message_count'] == \
         total + 1
+    assert assert_rosbags_reads(output, tmp_path) == total + 1
 
 
 def test_rejects_bad_parameters(context, tmp_path):

@@ -6,6 +6,7 @@ import subprocess
 import sys
 import time
 
+from helpers import read_with_rosbags
 from mcap_test_utils import read_independently, summary_of
 import pytest
 import rclpy
@@ -117,12 +118,16 @@ def test_kill_9_loses_at_most_the_flush_period(talker, tmp_path):
 
 @pytest.mark.parametrize('sig', [signal.SIGINT, signal.SIGTERM], ids=['SIGINT', 'SIGTERM'])
 def test_signals_close_with_summary_and_index(talker, tmp_path, sig):
-    output = tmp_path / 'closed.mcap'
+    """SIGINT into one file; SIGTERM into a bag directory split every 0.2 s."""
+    split = sig == signal.SIGTERM
+    output = tmp_path / ('closed' if split else 'closed.mcap')
     publisher = talker.create_publisher(Float64, '/sig/finger_2/curvature', 10)
-    process = start_recorder(output, '/sig', '-p', 'compression:=lz4')
+    extra = ['-p', 'max_duration_s:=0.2'] if split else []
+    process = start_recorder(output, '/sig', '-p', 'compression:=lz4', *extra)
+    first = output / 'closed_0.mcap' if split else output
     try:
         wait_for_subscriber(publisher, process)
-        wait_until_recording(publisher, process, output)
+        wait_until_recording(publisher, process, first)
         times = publish_for(publisher, 0.4)
         time.sleep(0.3)
         code = stop(process, sig)
@@ -130,14 +135,21 @@ def test_signals_close_with_summary_and_index(talker, tmp_path, sig):
         stop(process, signal.SIGKILL)
     log = process.stdout.read().decode()
     assert code == 0, log
-    header, summary, metadata = summary_of(output)
-    assert header.profile == 'ros2'
-    assert summary.chunk_indexes and {c.compression for c in summary.chunk_indexes} == {'lz4'}
-    assert all(c.message_index_offsets for c in summary.chunk_indexes)
+    assert 'Traceback' not in log
+    files = sorted(output.glob('*.mcap')) if split else [output]
+    assert len(files) >= (2 if split else 1)
+    got = []
+    for path in files:
+        header, summary, metadata = summary_of(path)
+        assert header.profile == 'ros2'
+        assert summary.chunk_indexes and {c.compression for c in summary.chunk_indexes} == \
+            {'lz4'}
+        assert all(c.message_index_offsets for c in summary.chunk_indexes)
+        got += [m.data for _, _, _, _, m in read_independently(path)]
     # Exact: the published values (-1.0 and float(i)) come back verbatim through CDR.
-    got = [m.data for _, _, _, _, m in read_independently(output)]
     warm_up = got.count(-1.0)
     assert got[warm_up:] == [float(i) for i in sorted(times)]
-    assert summary.statistics.message_count == warm_up + len(times)
     bag = yaml.safe_load(metadata['rosbag2']['serialized_metadata'])
     assert bag['message_count'] == warm_up + len(times)
+    # rosbags reads the file, or the bag directory through the metadata.yaml written on close.
+    assert [m.data for _, _, _, m in read_with_rosbags(output)] == got

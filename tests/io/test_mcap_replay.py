@@ -2,15 +2,18 @@
 
 import math
 
-from helpers import assert_designs_close
-from mcap_test_utils import ATM, fluid_pressure, read_independently, wrench
+from helpers import assert_designs_close, read_with_rosbags
+from mcap_test_utils import (assert_rosbags_reads, ATM, fluid_pressure, read_independently,
+                             summary_of, wrench)
 import numpy as np
 from numpy.testing import assert_allclose
 import pytest
 from rclpy.serialization import serialize_message
+import yaml
 
 from fpc_gripper.io.cli import main
 from fpc_gripper.io.config import default_gripper_config_path, load_gripper_config
+from fpc_gripper.io.mcap_reader import McapFile
 from fpc_gripper.io.mcap_writer import Rosbag2McapWriter
 from fpc_gripper.model import AdaptiveSolver
 from fpc_gripper.model.pipeline import ModelSettings
@@ -21,9 +24,9 @@ GAUGE = [0.0, 40e3, 80e3, 80e3, 120e3, 160e3, 200e3, 150e3]
 FORCES = {2: (0.05, 0.0), 5: (0.0, -0.03)}
 
 
-def write_inputs(path, namespace='/gripper'):
+def write_inputs(path, namespace='/gripper', **kwargs):
     """finger_0: commanded pressure and tip forces; finger_1: measured pressure, one < 1 atm."""
-    with Rosbag2McapWriter(path) as writer:
+    with Rosbag2McapWriter(path, **kwargs) as writer:
         writer.add_topic(f'{namespace}/finger_0/pressure_command',
                          'sensor_msgs/msg/FluidPressure')
         writer.add_topic(f'{namespace}/finger_0/tip_force', 'geometry_msgs/msg/WrenchStamped')
@@ -70,6 +73,7 @@ def replayed(tmp_path_factory):
     source = write_inputs(tmp / 'in.mcap')
     out = tmp / 'out.mcap'
     assert main(['replay-model', str(source), str(out)]) == 0
+    assert assert_rosbags_reads(out, tmp) == 3 * (len(GAUGE) + len(FORCES) + len(GAUGE))
     by_topic = {}
     for topic, type_name, log_time, publish_time, msg in read_independently(out):
         by_topic.setdefault(topic, []).append((log_time, publish_time, msg))
@@ -193,5 +197,50 @@ def test_inputs_the_node_rejects_are_rejected_in_replay(tmp_path, capsys):
         assert_allclose((tip.x, tip.z), solver.solve(gauge).tip, rtol=0, atol=1e-9)
     # With the stale check off the late force is taken.
     assert main(['replay-model', str(path), str(out), '--no-rigidity', '--stale-after',
-                 '0']) == 0
+                 '0', '--force']) == 0
     assert '3 solves, 0 not converged, 3 rejected' in capsys.readouterr().out
+
+
+def test_a_bag_directory_replays_as_the_single_file(tmp_path):
+    single = write_inputs(tmp_path / 'in.mcap')
+    split = write_inputs(tmp_path / 'in_bag', max_duration=3 * PERIOD)
+    assert len(list(split.glob('*.mcap'))) == 3
+    outputs = []
+    for source in (single, split):
+        out = tmp_path / f'out_{source.stem}.mcap'
+        assert main(['replay-model', str(source), str(out), '--quiet', '--no-rigidity']) == 0
+        with McapFile(out) as recording:
+            outputs.append([(m.topic, m.log_time, m.publish_time, m.data)
+                            for m in recording.messages(decode=False)])
+        assert len(read_with_rosbags(out)) == len(outputs[-1])
+    assert outputs[0] == outputs[1] and len(outputs[0]) == 3 * 18
+    # The outputs are offered as the node offers them: reliable, transient local, depth 1.
+    _, summary, _ = summary_of(tmp_path / 'out_in.mcap')
+    for channel in summary.channels.values():
+        (qos,) = yaml.safe_load(channel.metadata['offered_qos_profiles'])
+        assert (qos['reliability'], qos['durability'], qos['depth']) == (
+            'reliable', 'transient_local', 1)
+
+
+def test_frame_prefix_as_the_node(tmp_path, capsys):
+    path = tmp_path / 'in.mcap'
+    with Rosbag2McapWriter(path) as writer:
+        writer.add_topic('/finger_0/pressure_command', 'sensor_msgs/msg/FluidPressure')
+        writer.add_topic('/finger_0/tip_force', 'geometry_msgs/msg/WrenchStamped')
+        writer.write('/finger_0/pressure_command', serialize_message(fluid_pressure(0, 9e4)),
+                     BASE)
+        force = wrench(1, 0.0, 0.2)
+        force.header.frame_id = 'left/finger_0'
+        writer.write('/finger_0/tip_force', serialize_message(force), BASE + PERIOD)
+    out = tmp_path / 'out.mcap'
+    assert main(['replay-model', str(path), str(out), '--no-rigidity', '--quiet']) == 0
+    assert '1 solves, 0 not converged, 1 rejected' in capsys.readouterr().out
+    assert main(['replay-model', str(path), str(out), '--no-rigidity', '--quiet', '--force',
+                 '--frame-prefix', 'left/']) == 0
+    assert '2 solves, 0 not converged, 0 rejected' in capsys.readouterr().out
+    shapes = [m for t, _, _, _, m in read_independently(out) if t == '/finger_0/shape']
+    assert [m.header.frame_id for m in shapes] == ['left/finger_0'] * 2
+    solver = AdaptiveSolver(load_gripper_config(default_gripper_config_path()).fingers[0]
+                            .design, tolerance=ModelSettings().tolerance)
+    tip = shapes[-1].poses[-1].pose.position
+    assert_allclose((tip.x, tip.z), solver.solve(9e4, (0.0, 0.2)).tip, rtol=0, atol=1e-9)

@@ -1,17 +1,20 @@
 """Rosbag2-form MCAP writing: schema text, records and metadata, flush and split behaviour."""
 
+from helpers import read_with_rosbags
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
-from mcap_test_utils import assert_same_fields, read_independently, samples, summary_of
+from mcap_test_utils import (assert_rosbags_reads, assert_same_fields, read_independently,
+                             samples, summary_of)
 import pytest
 from rclpy.qos import qos_profile_sensor_data, QoSProfile
 from rclpy.serialization import serialize_message
 import yaml
 
 from fpc_gripper.io.mcap_reader import McapFile, recover, TruncatedFileError
-from fpc_gripper.io.mcap_writer import (DEFINITION_SEPARATOR, message_definition,
-                                        Rosbag2McapWriter, SchemaNotFoundError,
-                                        serialize_qos_profiles, type_name_of)
+from fpc_gripper.io.mcap_writer import (atomic_mcap_writer, DEFINITION_SEPARATOR,
+                                        message_definition, Rosbag2McapWriter,
+                                        SchemaNotFoundError, serialize_qos_profiles,
+                                        type_name_of)
 
 SEP = '=' * 80
 
@@ -38,7 +41,7 @@ def test_unknown_types_raise():
         message_definition('not a type')
 
 
-def test_every_gripper_type_decodes_with_mcap_ros2(tmp_path):
+def test_every_gripper_type_decodes_with_mcap_ros2_and_rosbags(tmp_path):
     path = tmp_path / 'all.mcap'
     sent = samples(3)
     with Rosbag2McapWriter(path) as writer:
@@ -53,6 +56,8 @@ def test_every_gripper_type_decodes_with_mcap_ros2(tmp_path):
         schema, decoded = got['/' + topic.lstrip('/')]
         assert schema == type_name_of(msg)
         assert_same_fields(msg, decoded, topic)
+    # rosbags builds its types from the file's schemas and checks their RIHS01 hashes.
+    assert assert_rosbags_reads(path, tmp_path) == len(sent)
 
 
 def test_records_are_in_rosbag2_form(tmp_path):
@@ -121,6 +126,7 @@ def test_flushed_chunks_survive_a_crash(tmp_path):
     assert (report.messages, report.complete) == (20, False)
     got = read_independently(tmp_path / 'recovered.mcap')
     assert [log for _, _, log, _, _ in got] == list(range(20))
+    assert assert_rosbags_reads(tmp_path / 'recovered.mcap', tmp_path) == 20
 
 
 def test_split_by_duration_into_a_directory(tmp_path):
@@ -138,6 +144,14 @@ def test_split_by_duration_into_a_directory(tmp_path):
     assert meta['message_count'] == 35
     assert meta['relative_file_paths'] == [f.name for f in files]
     assert [f['message_count'] for f in meta['files']] == counts
+    # As rosbag2 writes them, the last file embeds the whole bag's metadata.
+    _, _, embedded = summary_of(files[-1])
+    assert yaml.safe_load(embedded['rosbag2']['serialized_metadata']) == meta
+    # The bag directory opens in rosbags, every split file in order.
+    assert [log for _, _, log, _ in read_with_rosbags(out)] == list(range(35))
+    # And each split file alone. (Its embedded metadata is the bag's when it was closed,
+    # naming the earlier files too, as rosbag2's MCAP storage writes it.)
+    assert [len(read_with_rosbags(f)) for f in files] == counts
 
 
 def test_split_by_size_keeps_every_message(tmp_path):
@@ -160,3 +174,36 @@ def test_refuses_to_overwrite(tmp_path):
     with pytest.raises(FileExistsError):
         Rosbag2McapWriter(out)
     assert out.read_bytes() == b'precious'
+
+
+def test_atomic_writer_names_the_final_file_and_refuses_to_replace(tmp_path):
+    target = tmp_path / 'final.mcap'
+    data = serialize_message(samples(1)['aperture'])
+    with atomic_mcap_writer(target, compression='lz4') as writer:
+        writer.add_topic('/aperture', 'std_msgs/msg/Float64')
+        for i in range(3):
+            writer.write('/aperture', data, 10 + i)
+        # Written under a temporary name beside the target until complete.
+        (tmp,) = [p for p in tmp_path.iterdir()]
+        assert tmp.name.startswith('.final.mcap.') and not target.exists()
+    assert [p.name for p in tmp_path.iterdir()] == ['final.mcap']
+    _, _, metadata = summary_of(target)
+    bag = yaml.safe_load(metadata['rosbag2']['serialized_metadata'])
+    assert bag['relative_file_paths'] == ['final.mcap']
+    assert [f['path'] for f in bag['files']] == ['final.mcap']
+    assert assert_rosbags_reads(target, tmp_path) == 3
+    before = target.read_bytes()
+    with pytest.raises(FileExistsError, match='--force'):
+        with atomic_mcap_writer(target):
+            pass
+    assert target.read_bytes() == before
+    # A failing body leaves the old file, even with overwrite.
+    with pytest.raises(RuntimeError):
+        with atomic_mcap_writer(target, overwrite=True) as writer:
+            raise RuntimeError('failed half way')
+    assert target.read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ['bag_of_final', 'final.mcap']
+    with atomic_mcap_writer(target, overwrite=True) as writer:
+        writer.add_topic('/aperture', 'std_msgs/msg/Float64')
+        writer.write('/aperture', data, 99)
+    assert [log for _, _, log, _ in read_with_rosbags(target)] == [99]

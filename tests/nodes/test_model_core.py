@@ -145,8 +145,25 @@ def test_check_tip_force(force, frame, rejection):
 
 # -- state machine --------------------------------------------------------------------------
 
-def test_initial_state_is_one_shared_solve_at_rest():
+def at_rest(core, now_ns=0):
+    """Offer every finger 0 Pa gauge and solve: the state most tests start from."""
+    for i in range(len(core.fingers)):
+        assert core.offer_pressure(i, ATM, now_ns=now_ns).accepted
+    return core.process(range(len(core.fingers)), now_ns)
+
+
+def test_nothing_is_solved_before_a_pressure_then_one_shared_solve_at_rest():
     core, factory = make_core()
+    assert core.ready(0) == () and core.process(range(3), 0) == [] and not core.pending
+    for i in range(3):
+        status = core.status(i)
+        assert status.level is Level.WARN and status.message == 'waiting for pressure input'
+    # A tip force alone answers nothing: the finger still has no pressure to solve at.
+    assert core.offer_tip_force(0, 0.0, 0.0, 'finger_0', now_ns=1).accepted
+    assert core.ready(0) == () and core.process(range(3), 0) == [] and factory.calls == []
+    assert core.status(0).message == 'waiting for pressure input'
+    for i in range(3):
+        assert core.offer_pressure(i, ATM, now_ns=2).accepted
     assert core.ready(0) == (0, 1, 2)
     updates = core.process(core.ready(0), 0)
     assert [u.index for u in updates] == [0, 1, 2]
@@ -157,12 +174,38 @@ def test_initial_state_is_one_shared_solve_at_rest():
         assert update.result is updates[0].result
         assert_same_state(update.result, expected)
         assert core.status(update.index).level is Level.OK
+    assert core.fingers[0].coalesced == 0
+
+
+def test_warm_up_solves_once_per_solver_and_leaves_no_state():
+    stiff = DESIGN.replace(prestrain=0.15)
+    core, factory = make_core(designs=(DESIGN, stiff, DESIGN))
+    core.warm_up()
+    assert [len(s.calls) for s in factory.built] == [1, 1]
+    assert [len(s.rigidity_calls) for s in factory.built] == [1, 1]
+    assert all(s.calls[0] == (0.0, (0.0, 0.0), None) for s in factory.built)
+    assert core.ready(0) == () and not core.pending
+    assert all(state.result is None and state.solves == 0 for state in core.fingers)
+    assert core.status(0).message == 'waiting for pressure input'
+    # The first real solve is cold, as without the warm-up: the same answer.
+    core.offer_pressure(0, ATM + 1e5, now_ns=1)
+    (update, *_) = core.process((0,), 0)
+    assert factory.built[0].calls[-1][2] is None
+    assert_same_state(update.result, reference(1e5))
+
+
+def test_frame_prefix_names_the_expected_tip_force_frame():
+    core, _ = make_core(frame_prefix='left/')
+    assert core.offer_tip_force(1, 0.1, 0.0, 'left/finger_1').accepted
+    check = core.offer_tip_force(1, 0.1, 0.0, 'finger_1')
+    assert check.rejection is Rejection.WRONG_FRAME
+    assert check.detail == "frame_id 'finger_1' is not 'left/finger_1'"
 
 
 def test_distinct_designs_get_their_own_solvers():
     stiff = DESIGN.replace(prestrain=0.15)
     core, factory = make_core(designs=(DESIGN, stiff, DESIGN))
-    updates = core.process(range(3), 0)
+    updates = at_rest(core)
     assert len(factory.built) == 2
     assert [u.solved for u in updates] == [True, False, True]
     assert updates[1].result is updates[0].result
@@ -171,7 +214,7 @@ def test_distinct_designs_get_their_own_solvers():
 
 def test_latest_input_wins_and_warm_starts_from_the_last_good_state():
     core, factory = make_core()
-    core.process(range(3), 0)
+    at_rest(core)
     rest = core.fingers[0].result
     for kpa in (50, 100, 150):
         assert core.offer_pressure(0, ATM + kpa * 1e3, stamp_ns=kpa, now_ns=1).accepted
@@ -187,7 +230,7 @@ def test_latest_input_wins_and_warm_starts_from_the_last_good_state():
 
 def test_identical_inputs_share_one_solve_and_known_states_are_reused():
     core, factory = make_core()
-    core.process(range(3), 0)
+    at_rest(core)
     for i in range(3):
         core.offer_pressure(i, ATM + 2e5, now_ns=5)
     updates = core.process(core.ready(10 * MS), 10 * MS)
@@ -203,7 +246,7 @@ def test_identical_inputs_share_one_solve_and_known_states_are_reused():
 
 def test_tip_force_enters_the_solve():
     core, factory = make_core()
-    core.process(range(3), 0)
+    at_rest(core)
     assert core.offer_tip_force(2, 0.05, -0.1, 'finger_2', now_ns=1).accepted
     core.offer_pressure(2, ATM + 1e5, now_ns=1)
     (update,) = core.process(core.ready(MS), MS)
@@ -215,7 +258,7 @@ def test_tip_force_enters_the_solve():
 
 def test_rate_cap_is_a_token_bucket_per_finger():
     core, _ = make_core(max_rate_hz=100.0)
-    core.process(range(3), 0)
+    at_rest(core)
     # The bucket started full (RATE_BURST) and the rest state spent one token.
     assert RATE_BURST == 2.0
     core.offer_pressure(0, ATM + 1e3, now_ns=0)
@@ -235,7 +278,7 @@ def test_rate_cap_is_a_token_bucket_per_finger():
 
 def test_forced_processing_overdraws_the_bucket():
     core, _ = make_core(max_rate_hz=100.0)
-    core.process(range(3), 0)  # the rest state
+    at_rest(core)
     for _ in range(2):
         core.offer_pressure(0, ATM, now_ns=0)
         core.process((0,), 0)
@@ -247,7 +290,7 @@ def test_forced_processing_overdraws_the_bucket():
 
 def test_rejected_input_keeps_the_state_and_warns_until_an_accepted_one():
     core, factory = make_core(stale_after_s=1.0)
-    core.process(range(3), 0)
+    at_rest(core)
     core.offer_pressure(0, ATM + 1e5, now_ns=1)
     core.process((0,), MS)
     good = core.fingers[0].result
@@ -282,7 +325,7 @@ def test_rejected_input_keeps_the_state_and_warns_until_an_accepted_one():
 def test_solver_failure_keeps_the_last_good_state_and_is_not_retried():
     # One segment cannot carry 50 N pushing the tip along +Z: the continuation stalls.
     core, factory = make_core(solver_kwargs={'n_segments': 1})
-    core.process(range(3), 0)
+    at_rest(core)
     good = core.fingers[2].result
     core.offer_tip_force(2, 0.0, 50.0, 'finger_2', now_ns=1)
     (update,) = core.process((2,), MS)
@@ -317,7 +360,7 @@ def test_solver_exception_is_a_failure():
             return super().solve(pressure, tip_force, initial)
 
     core = ModelCore(list(zip(NAMES, (DESIGN,) * 3)), Raising, atmospheric_pressure=ATM)
-    core.process(range(3), 0)
+    at_rest(core)
     core.offer_pressure(1, ATM + 2e5, now_ns=1)
     (update,) = core.process((1,), MS)
     assert update.failure == 'solver raised LinAlgError: singular matrix'
@@ -326,7 +369,7 @@ def test_solver_exception_is_a_failure():
 
 def test_invalid_state_is_published_with_a_warning():
     core, _ = make_core(solver_kwargs={'n_segments': 1})
-    core.process(range(3), 0)
+    at_rest(core)
     core.offer_tip_force(0, 0.0, -50.0, 'finger_0', now_ns=1)
     (update,) = core.process((0,), MS)
     assert update.result is not None and not update.result.valid
@@ -337,7 +380,7 @@ def test_invalid_state_is_published_with_a_warning():
 
 def test_rebuild_solves_again_from_cold():
     core, factory = make_core()
-    core.process(range(3), 0)
+    at_rest(core)
     core.offer_pressure(0, ATM + 1e5, now_ns=1)
     core.process((0,), 0)
     old = core.fingers[0].result
@@ -353,7 +396,7 @@ def test_rebuild_solves_again_from_cold():
 
 def test_rigidity_is_shared_and_matches_the_solver():
     core, factory = make_core()
-    core.process(range(3), 0)
+    at_rest(core)
     for i in range(3):
         core.offer_pressure(i, ATM + 55.2e3, now_ns=1)
     core.process(range(3), MS)

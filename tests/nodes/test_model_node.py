@@ -1,8 +1,11 @@
 """Tests of the model node with real rclpy nodes in the private network namespace."""
 
+import functools
 import math
+import sys
 import threading
 import time
+import types
 
 from diagnostic_msgs.msg import DiagnosticArray
 from diagnostic_msgs.msg import DiagnosticStatus
@@ -17,13 +20,19 @@ from rclpy.context import Context
 from rclpy.exceptions import InvalidParameterValueException
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
+from rclpy.qos import DurabilityPolicy
 from rclpy.qos import qos_profile_sensor_data
+from rclpy.qos import QoSProfile
+from rclpy.qos import ReliabilityPolicy
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import FluidPressure
 from std_msgs.msg import Float64
 from visualization_msgs.msg import Marker
 from visualization_msgs.msg import MarkerArray
 
+from fpc_gripper.control.geometry import aperture_from_points
+from fpc_gripper.control.geometry import PalmGeometry
+from fpc_gripper.control.geometry import tips_in_palm_frame
 from fpc_gripper.io.config import load_gripper_config
 from fpc_gripper.io.messages import serialized_shape
 from fpc_gripper.io.messages import shape_message
@@ -34,8 +43,21 @@ from fpc_gripper.nodes.model_node import ModelNode
 
 ATM = 101325.0
 FINGERS = ('finger_0', 'finger_1', 'finger_2')
-DESIGN = load_gripper_config().fingers[0].design
+CONFIG = load_gripper_config()
+DESIGN = CONFIG.fingers[0].design
+PALM = PalmGeometry.from_config(CONFIG)
 TIMEOUT = 10.0
+LATCHED = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                     durability=DurabilityPolicy.TRANSIENT_LOCAL)
+STATE_TOPICS = [(f'{f}/{kind}', cls) for f in FINGERS for kind, cls in (
+    ('shape', Path), ('curvature', Float64), ('rigidity', Vector3Stamped))] + [
+    ('markers', MarkerArray), ('gripper_shape', MarkerArray)]
+
+
+def palm_points(index, xz):
+    """Finger-frame (X, Z) points in the palm frame, by the controller's palm geometry."""
+    xz = np.asarray(xz, dtype=float)
+    return tips_in_palm_frame(xz, PALM.palm_radius, [PALM.mount_angles[index]] * len(xz))
 
 
 def direct(gauge, force=(0.0, 0.0), n_segments=8, pressure_model='adiabatic'):
@@ -98,6 +120,14 @@ class Probe:
         with self.cond:
             return self.cond.wait_for(predicate, timeout)
 
+    def wait_connected(self, timeout=TIMEOUT):
+        """Wait until the node subscribes to every input (else a first message is lost)."""
+        pubs = [*self.pressure_pubs.values(), *self.force_pubs.values()]
+        deadline = time.monotonic() + timeout
+        while not all(p.get_subscription_count() for p in pubs):
+            assert time.monotonic() < deadline, 'the model node never subscribed'
+            time.sleep(0.01)
+
     def now(self):
         return self.node.get_clock().now()
 
@@ -153,6 +183,38 @@ def values(status):
     return {kv.key: kv.value for kv in status.values}
 
 
+class Latecomer:
+    """
+    A node that joins late: one subscription per model state topic, with a given QoS.
+
+    It lives as long as the module's executor: destroying a node while another thread
+    spins the executor races with its wait set.
+    """
+
+    def __init__(self, ros, namespace, qos=LATCHED, name='latecomer'):
+        self.ros = ros
+        self.node = ros.add(rclpy.create_node(f'{name}{namespace.replace("/", "_")}',
+                                              context=ros.context))
+        self.cond = threading.Condition()
+        self.got = {topic: [] for topic, _ in STATE_TOPICS}
+        for topic, cls in STATE_TOPICS:
+            self.node.create_subscription(cls, f'{namespace}/{topic}',
+                                          functools.partial(self._store, topic), qos)
+
+    def _store(self, topic, msg):
+        with self.cond:
+            self.got[topic].append(msg)
+            self.cond.notify_all()
+
+    def count(self):
+        with self.cond:
+            return sum(len(v) for v in self.got.values())
+
+    def wait(self, predicate, timeout=TIMEOUT):
+        with self.cond:
+            return self.cond.wait_for(predicate, timeout)
+
+
 class Ros:
     """One context and one executor thread for all the nodes of this module."""
 
@@ -161,8 +223,13 @@ class Ros:
         rclpy.init(context=self.context)
         self.executor = SingleThreadedExecutor(context=self.context)
         self.nodes = []
-        self.thread = threading.Thread(target=self.executor.spin, daemon=True)
+        self.stop = threading.Event()
+        self.thread = threading.Thread(target=self._spin, daemon=True)
         self.thread.start()
+
+    def _spin(self):
+        while not self.stop.is_set():
+            self.executor.spin_once(timeout_sec=0.05)
 
     def add(self, node):
         self.nodes.append(node)
@@ -170,8 +237,11 @@ class Ros:
         return node
 
     def close(self):
-        self.executor.shutdown(timeout_sec=5.0)
+        # The spin thread ends first: shutting the executor down under it races with the
+        # guard condition it triggers.
+        self.stop.set()
         self.thread.join(timeout=5.0)
+        self.executor.shutdown(timeout_sec=5.0)
         for node in self.nodes:
             node.destroy_node()
         self.context.try_shutdown()
@@ -216,13 +286,26 @@ def test_serialized_shape_decodes_to_shape_message():
 
 
 @pytest.mark.ros
-def test_initial_state_at_rest(model):
+def test_nothing_before_the_first_pressure_then_the_rest_state(ros, model):
     node, probe = model
-    rest = direct(0.0)
     for finger in FINGERS:
-        assert probe.wait(lambda f=finger: probe.shapes[f]), f'no {finger} shape'
-        assert_shape_is(probe.shapes[finger][0], rest, finger)
+        status = probe.status_where(finger, lambda s: s.level == DiagnosticStatus.WARN)
+        assert status.message == 'waiting for pressure input'
+    # Nothing was published: a transient-local subscriber joining now gets no history.
+    late = Latecomer(ros, '/m', name='early')
+    time.sleep(0.5)
+    assert late.count() == 0 and all(not probe.shapes[f] for f in FINGERS)
+    # A tip force alone is no pressure: still nothing.
+    probe.send_force('finger_0', 0.0, 0.0)
+    time.sleep(0.3)
+    assert late.count() == 0 and not probe.shapes['finger_0']
+    since = len(probe.diagnostics)
+    rest = direct(0.0)
+    stamps = [probe.send_pressure(f, ATM) for f in FINGERS]
+    for finger, stamp in zip(FINGERS, stamps):
+        assert_shape_is(probe.shape_stamped(finger, stamp), rest, finger)
         probe.curvature_becomes(finger, rest.curvature)
+        probe.status_where(finger, lambda s: s.level == DiagnosticStatus.OK, since)
     assert sum(s.solves for s in node.core.fingers) == 1
 
 
@@ -368,8 +451,8 @@ def test_bad_parameters_are_refused_with_a_reason(model, name, value, reason):
 @pytest.mark.ros
 def test_parameter_changes_rebuild_the_solvers(model):
     node, probe = model
-    stamp = probe.send_pressure('finger_0', ATM + 120e3)
-    probe.shape_stamped('finger_0', stamp)
+    for finger, kpa in zip(FINGERS, (120, 60, 30)):
+        probe.shape_stamped(finger, probe.send_pressure(finger, ATM + kpa * 1e3))
     try:
         # Every finger is re-solved after a rebuild: wait for all of them, so that a late
         # shape of one change cannot pass for the next one.
@@ -402,49 +485,39 @@ def test_parameter_changes_rebuild_the_solvers(model):
 @pytest.mark.ros
 def test_rigidity_and_markers_for_new_subscribers(ros, model):
     node, probe = model
+    for finger in FINGERS:
+        probe.shape_stamped(finger, probe.send_pressure(finger, ATM + 10e3))
     stamp = probe.send_pressure('finger_2', ATM + 55.2e3)
     probe.shape_stamped('finger_2', stamp)
-    got = {'rigidity': [], 'markers': []}
-    cond = threading.Condition()
+    late = Latecomer(ros, '/m', name='slow_outputs')
 
-    def record(key):
-        def store(msg):
-            with cond:
-                got[key].append(msg)
-                cond.notify_all()
-        return store
+    def rigidity_stamped(stamp):
+        return next((m for m in late.got['finger_2/rigidity']
+                     if time_to_ns(m.header.stamp) == stamp), None)
 
-    subs = [probe.node.create_subscription(Vector3Stamped, '/m/finger_2/rigidity',
-                                           record('rigidity'), 10),
-            probe.node.create_subscription(MarkerArray, '/m/markers', record('markers'), 10)]
-    try:
-        with cond:
-            assert cond.wait_for(lambda: got['rigidity'] and got['markers'], TIMEOUT)
-        rigidity = got['rigidity'][0]
-        assert rigidity.header.frame_id == 'finger_2'
-        solver = CCMSolver(DESIGN)
-        assert_allclose(rigidity.vector.x, solver.rigidity(55.2e3, axis='x').value, rtol=1e-6)
-        assert_allclose(rigidity.vector.z, solver.rigidity(55.2e3, axis='z').value, rtol=1e-6)
-        assert rigidity.vector.x == pytest.approx(1.396e-3, rel=1e-3)  # SPEC reference
-        markers = {m.id: m for m in got['markers'][0].markers}
-        assert sorted(markers) == [0, 1, 2]
-        strip = markers[2]
-        assert strip.type == Marker.LINE_STRIP and strip.header.frame_id == 'finger_2'
-        points = np.array([[p.x, p.y, p.z] for p in strip.points])
-        assert_allclose(points[:, [0, 2]], direct(55.2e3).points, atol=1e-9)
-        # While subscribed, both follow the input (throttled, the last one always sent).
-        stamps = [probe.send_pressure('finger_2', ATM + kpa * 1e3) for kpa in (10, 0)]
-        with cond:
-            assert cond.wait_for(lambda: any(
-                time_to_ns(m.header.stamp) == stamps[-1] for m in got['rigidity']), TIMEOUT)
-            assert cond.wait_for(lambda: any(
-                time_to_ns(m.header.stamp) == stamps[-1] for a in got['markers']
-                for m in a.markers), TIMEOUT)
-        last = next(m for m in got['rigidity'] if time_to_ns(m.header.stamp) == stamps[-1])
-        assert last.vector.x == pytest.approx(1.636e-3, rel=1e-3)  # SPEC reference, 0 kPa
-    finally:
-        for sub in subs:
-            probe.node.destroy_subscription(sub)
+    def markers_stamped(stamp):
+        return next((a for a in late.got['markers'] for m in a.markers
+                     if m.id == 2 and time_to_ns(m.header.stamp) == stamp), None)
+
+    # The newest state, from the publishers' transient-local history.
+    assert late.wait(lambda: rigidity_stamped(stamp) and markers_stamped(stamp))
+    rigidity = rigidity_stamped(stamp)
+    assert rigidity.header.frame_id == 'finger_2'
+    solver = CCMSolver(DESIGN)
+    assert_allclose(rigidity.vector.x, solver.rigidity(55.2e3, axis='x').value, rtol=1e-6)
+    assert_allclose(rigidity.vector.z, solver.rigidity(55.2e3, axis='z').value, rtol=1e-6)
+    assert rigidity.vector.x == pytest.approx(1.396e-3, rel=1e-3)  # SPEC reference
+    markers = {m.id: m for m in markers_stamped(stamp).markers}
+    assert sorted(markers) == [0, 1, 2]
+    strip = markers[2]
+    assert strip.type == Marker.LINE_STRIP and strip.header.frame_id == 'palm'
+    points = np.array([[p.x, p.y, p.z] for p in strip.points])
+    # Placed by the controller's palm geometry (an independent formula of the placement).
+    assert_allclose(points, palm_points(2, direct(55.2e3).points), rtol=0, atol=1e-12)
+    # Both follow the input (throttled, the last one always sent).
+    stamps = [probe.send_pressure('finger_2', ATM + kpa * 1e3) for kpa in (10, 0)]
+    assert late.wait(lambda: rigidity_stamped(stamps[-1]) and markers_stamped(stamps[-1]))
+    assert rigidity_stamped(stamps[-1]).vector.x == pytest.approx(1.636e-3, rel=1e-3)  # 0 kPa
 
 
 @pytest.mark.ros
@@ -459,7 +532,7 @@ def test_measured_pressure_input(single):
 def test_solver_failure_keeps_the_last_good_state(single):
     # One segment cannot carry 50 N pushing the tip along +Z: the solve fails.
     node, probe = single
-    assert probe.wait(lambda: probe.shapes['finger_2'])
+    probe.shape_stamped('finger_2', probe.send_pressure('finger_2', ATM))
     state = node.core.fingers[2]
     kept = state.result
     count = len(probe.shapes['finger_2'])
@@ -489,3 +562,142 @@ def test_invalid_parameter_overrides_refuse_to_start(ros):
     with pytest.raises(InvalidParameterValueException):
         ModelNode(context=ros.context, namespace='/bad',
                   parameter_overrides=[Parameter('n_segments', value=0)])
+
+
+@pytest.mark.ros
+def test_late_subscribers_get_the_newest_state_and_volatile_ones_connect(ros, model):
+    node, probe = model
+    for finger, kpa in zip(FINGERS, (70, 90, 110)):
+        probe.shape_stamped(finger, probe.send_pressure(finger, ATM + kpa * 1e3))
+    stamp = probe.send_pressure('finger_1', ATM + 130e3)
+    probe.shape_stamped('finger_1', stamp)
+    expected = direct(130e3)
+    # Wait until every slow output went out: rigidity at <= 10 Hz, markers at 1 Hz while
+    # nobody watches them (30 Hz while someone does).
+    time.sleep(1.3)
+    late = Latecomer(ros, '/m')
+    volatile = Latecomer(ros, '/m', qos=QoSProfile(depth=10), name='volatile')
+    best_effort = Latecomer(ros, '/m', qos=qos_profile_sensor_data, name='best_effort')
+    assert late.wait(lambda: all(late.got.values()))
+    time.sleep(0.3)
+    # Exactly the newest state of each topic, once: history, not a republish.
+    assert {t: len(v) for t, v in late.got.items()} == {t: 1 for t, _ in STATE_TOPICS}
+    assert time_to_ns(late.got['finger_1/shape'][0].header.stamp) == stamp
+    assert_shape_is(late.got['finger_1/shape'][0], expected, 'finger_1')
+    # The circle fit stops at its own tolerance (~1e-10 relative).
+    assert_allclose(late.got['finger_1/curvature'][0].data, expected.curvature, rtol=1e-9)
+    assert time_to_ns(late.got['finger_1/rigidity'][0].header.stamp) == stamp
+    tips = {m.id: m for m in late.got['gripper_shape'][0].markers
+            if m.ns == 'fpc_gripper/tip'}
+    assert time_to_ns(tips[1].header.stamp) == stamp
+    # Volatile and best-effort subscribers are matched, and get no history ...
+    for other in (volatile, best_effort):
+        for topic, _ in STATE_TOPICS:
+            publishers = other.node.get_publishers_info_by_topic(f'/m/{topic}')
+            assert [i.node_name for i in publishers] == ['model_node'], topic
+        assert other.count() == 0
+    assert all(p.get_subscription_count() >= 3 for p in node._shape_pubs)
+    # ... but every answer to a new input.
+    stamp = probe.send_pressure('finger_1', ATM + 140e3)
+    for other in (volatile, best_effort):
+        assert other.wait(lambda o=other: any(
+            time_to_ns(m.header.stamp) == stamp for m in o.got['finger_1/shape'])
+            and o.got['finger_1/curvature'] and o.got['finger_1/rigidity']
+            and o.got['gripper_shape'])
+
+
+@pytest.mark.ros
+def test_gripper_shape_places_every_finger_on_the_palm(ros, model):
+    """Tip positions in the palm frame give the controller's aperture; circles fit."""
+    node, probe = model
+    gauges = (40e3, 180e3, 260e3)
+    stamps = [probe.send_pressure(f, ATM + g) for f, g in zip(FINGERS, gauges)]
+    for finger, stamp in zip(FINGERS, stamps):
+        probe.shape_stamped(finger, stamp)
+    late = Latecomer(ros, '/m', name='palm')
+    assert late.wait(lambda: any(
+        {time_to_ns(m.header.stamp) for m in a.markers} == set(stamps)
+        for a in late.got['gripper_shape']))
+    shape = next(a for a in late.got['gripper_shape']
+                 if {time_to_ns(m.header.stamp) for m in a.markers} == set(stamps))
+    parts = {(m.ns, m.id): m for m in shape.markers}
+    assert all(m.header.frame_id == 'palm' for m in shape.markers)
+    results = [direct(g) for g in gauges]
+    tips = np.array([r.points[-1] for r in results])
+    got_tips = np.array([[parts['fpc_gripper/tip', i].pose.position.x,
+                          parts['fpc_gripper/tip', i].pose.position.y,
+                          parts['fpc_gripper/tip', i].pose.position.z] for i in range(3)])
+    assert_allclose(got_tips, PALM.tip_points(tips), rtol=0, atol=1e-12)
+    assert_allclose(aperture_from_points(got_tips), PALM.aperture(tips), rtol=1e-12)
+    assert PALM.aperture(tips) > 0.02      # a real triangle, not a degenerate check
+    for i, result in enumerate(results):
+        strip = parts['fpc_gripper/midplane', i]
+        points = np.array([[p.x, p.y, p.z] for p in strip.points])
+        assert_allclose(points, palm_points(i, result.points), rtol=0, atol=1e-12)
+        assert_allclose(points[-1], got_tips[i], rtol=0, atol=0)
+        circle = parts['fpc_gripper/circle', i]
+        ring = np.array([[p.x, p.y, p.z] for p in circle.points])
+        # In the finger's plane (spanned by the palm normal and its radial direction) ...
+        phi = PALM.mount_angles[i]
+        assert_allclose(ring @ [-math.sin(phi), math.cos(phi), 0.0], 0.0, atol=1e-12)
+        # ... a circle of the fitted curvature's radius.
+        # Evenly spaced round the whole circle (the last point closes it): their mean is
+        # its centre.
+        centre = ring[:-1].mean(axis=0)
+        radius = np.linalg.norm(ring - centre, axis=1)
+        assert_allclose(radius, 1.0 / abs(result.curvature), rtol=1e-9)
+
+
+class _FakeBroadcaster:
+    sent = []
+
+    def __init__(self, node):
+        self.node = node
+
+    def sendTransform(self, transforms):  # noqa: N802 - tf2_ros's name
+        _FakeBroadcaster.sent.extend(transforms)
+
+
+@pytest.mark.ros
+def test_frame_prefix_and_the_static_palm_transforms(ros, monkeypatch):
+    """With tf2_ros importable the node broadcasts palm -> finger_<i>, all prefixed."""
+    module = types.ModuleType('tf2_ros.static_transform_broadcaster')
+    module.StaticTransformBroadcaster = _FakeBroadcaster
+    monkeypatch.setitem(sys.modules, 'tf2_ros', types.ModuleType('tf2_ros'))
+    monkeypatch.setitem(sys.modules, 'tf2_ros.static_transform_broadcaster', module)
+    _FakeBroadcaster.sent.clear()
+    node = ros.add(ModelNode(context=ros.context, namespace='/left', parameter_overrides=[
+        Parameter('tolerance', value=0.0), Parameter('frame_prefix', value='left/')]))
+    probe = Probe(ros.context, '/left')
+    ros.add(probe.node)
+    probe.wait_connected()
+    sent = _FakeBroadcaster.sent
+    assert [(t.header.frame_id, t.child_frame_id) for t in sent] == [
+        ('left/palm', f'left/{f}') for f in FINGERS]
+    assert node.palm_frame == 'left/palm'
+    stamp = probe.send_pressure('finger_1', ATM + 200e3)
+    result = direct(200e3)
+    assert_shape_is(probe.shape_stamped('finger_1', stamp), result, 'left/finger_1')
+    # The transform maps the finger-frame midplane onto the palm-frame one.
+    transform = sent[1].transform
+    q = [transform.rotation.x, transform.rotation.y, transform.rotation.z,
+         transform.rotation.w]
+    xyz = np.column_stack([result.points[:, 0], 0 * result.points[:, 0], result.points[:, 1]])
+    rotated = np.array([quaternion_rotate(q, p) for p in xyz])
+    offset = [transform.translation.x, transform.translation.y, transform.translation.z]
+    assert_allclose(rotated + offset, palm_points(1, result.points), rtol=0, atol=1e-12)
+    # Tip forces must come in the prefixed finger frame.
+    since = len(probe.diagnostics)
+    probe.send_force('finger_1', 0.0, 0.1)
+    probe.status_where('finger_1', lambda s: "is not 'left/finger_1'" in s.message, since)
+    stamp = probe.send_force('finger_1', 0.0, 0.1, frame='left/finger_1')
+    assert_shape_is(probe.shape_stamped('finger_1', stamp), direct(200e3, (0.0, 0.1)),
+                    'left/finger_1')
+
+
+def quaternion_rotate(q, v):
+    """Rotate v by the unit quaternion q = (x, y, z, w): q v q*."""
+    x, y, z, w = q
+    u = np.array([x, y, z])
+    v = np.asarray(v, dtype=float)
+    return v + 2.0 * np.cross(u, np.cross(u, v) + w * v)

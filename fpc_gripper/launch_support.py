@@ -1,0 +1,102 @@
+"""Launch arguments and parameter lists shared by launch/gripper.launch.py and model.launch.py."""
+
+import pathlib
+
+__all__ = ['COMMON_ARGUMENTS', 'arguments', 'config_file', 'node_parameters', 'share_directory']
+
+PACKAGE = 'fpc_gripper'
+#: ``(name, default, description)`` of the launch arguments every launch file declares;
+#: a default of None is filled in by `arguments` (the package's own files).
+COMMON_ARGUMENTS = (
+    ('namespace', '', 'Namespace of every node (and so of every relative topic).'),
+    ('gripper_config', None, 'Gripper YAML (fingers, palm radius, pressure limit); default '
+     'share/fpc_gripper/msg_configs/gripper_paper.yaml.'),
+    ('params_file', '', 'A ROS parameter file applied to every node after its own '
+     'share/fpc_gripper/config/<node>.yaml; key its sections /**/<node name> so that they '
+     'match in any namespace.'),
+    ('use_sim_time', 'false', 'Use /clock.'),
+    ('frame_prefix', '', 'Prefix of every frame id (<prefix>palm, <prefix>finger_<i>), so '
+     'that two grippers can share a tf tree.'),
+)
+
+
+def share_directory():
+    """Return the installed share directory of fpc_gripper (ament index), else the source tree."""
+    try:
+        from ament_index_python.packages import get_package_share_directory
+        return pathlib.Path(get_package_share_directory(PACKAGE))
+    except (ImportError, LookupError):
+        return pathlib.Path(__file__).resolve().parents[1]
+
+
+def config_file(node_name):
+    """Return the path of a node's parameter file, ``config/<node_name>.yaml``."""
+    return share_directory() / 'config' / f'{node_name}.yaml'
+
+
+def arguments(extra=()):
+    """
+    Declare the common launch arguments, then `extra`.
+
+    Parameters
+    ----------
+    extra : iterable of tuple
+        More ``(name, default, description)`` or ``(name, default, description,
+        choices)`` rows.
+
+    Returns
+    -------
+    list of launch.actions.DeclareLaunchArgument
+
+    """
+    from launch.actions import DeclareLaunchArgument
+
+    defaults = {'gripper_config': str(share_directory() / 'msg_configs' / 'gripper_paper.yaml')}
+    out = []
+    for row in (*COMMON_ARGUMENTS, *extra):
+        name, default, description = row[:3]
+        kwargs = {'choices': list(row[3])} if len(row) > 3 else {}
+        out.append(DeclareLaunchArgument(name, default_value=defaults.get(name, default),
+                                         description=description, **kwargs))
+    return out
+
+
+def node_parameters(context, node_name, frames=True, **overrides):
+    """
+    Build a node's ``parameters`` list: its config file, the params_file, then overrides.
+
+    Later entries win: the package's ``config/<node_name>.yaml`` first, then the
+    ``params_file`` launch argument (if given), then the launch arguments that the nodes
+    share (gripper_config, use_sim_time and, with `frames`, frame_prefix) and
+    `overrides`.
+
+    Parameters
+    ----------
+    context : launch.LaunchContext
+        The context, to read the launch arguments.
+    node_name : str
+        Node name, which names its config file.
+    frames : bool
+        The node has a frame_prefix parameter.
+    **overrides
+        Further parameter values; None values are left out.
+
+    Returns
+    -------
+    list
+        Paths and one dict, as ``launch_ros.actions.Node(parameters=...)`` takes them.
+
+    """
+    def value(name):
+        return context.launch_configurations.get(name, '')
+
+    params = [str(config_file(node_name))]
+    if value('params_file'):
+        params.append(value('params_file'))
+    shared = {'gripper_config': value('gripper_config'),
+              'use_sim_time': value('use_sim_time').lower() in ('true', '1', 'yes')}
+    if frames:
+        shared['frame_prefix'] = value('frame_prefix')
+    shared.update({k: v for k, v in overrides.items() if v is not None})
+    params.append(shared)
+    return params

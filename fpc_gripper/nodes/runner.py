@@ -1,0 +1,159 @@
+"""The body of every node's main(): spin until SIGINT or SIGTERM, then shut down cleanly."""
+
+import signal
+import socket
+import threading
+import time
+
+import rclpy
+from rclpy.exceptions import ParameterException
+from rclpy.executors import ExternalShutdownException
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.impl.implementation_singleton import rclpy_implementation
+from rclpy.logging import get_logger
+from rclpy.signals import SignalHandlerOptions
+
+__all__ = ['FORCE_AFTER_S', 'START_ERRORS', 'StopRequest', 'run_node']
+
+#: A stop signal this long after the first one interrupts a callback still running [s].
+FORCE_AFTER_S = 1.0
+#: What a node's constructor raises for a bad configuration: exit 1 with a message.
+START_ERRORS = (ValueError, OSError, ParameterException)
+_STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+RCLError = rclpy_implementation.RCLError
+
+
+class StopRequest:
+    """
+    The process's SIGINT and SIGTERM handler: the first asks for a stop, repeats are absorbed.
+
+    A terminal's Ctrl-C under ``ros2 launch`` reaches every node twice within
+    milliseconds (the terminal signals launch's whole process group, and launch passes
+    the signal on), and launch follows up with SIGTERM after its timeout. None of these
+    may interrupt the shutdown that the first one started, so the handler never raises
+    while the shutdown runs. A signal that comes `force_after_s` or more after the
+    first, while a callback still holds the executor (a first-ever numba compile takes
+    minutes), raises KeyboardInterrupt, once, to end that callback: the node is then
+    destroyed as after any other stop.
+
+    Parameters
+    ----------
+    force_after_s : float
+        See above [s].
+    clock : callable
+        Monotonic seconds.
+
+    """
+
+    def __init__(self, force_after_s=FORCE_AFTER_S, clock=time.monotonic):
+        self.signum = None
+        self.stopping = False
+        self._first = None
+        self._force_after_s = float(force_after_s)
+        self._clock = clock
+
+    @property
+    def requested(self):
+        """True once a stop signal arrived."""
+        return self.signum is not None
+
+    def __call__(self, signum, frame=None):
+        """Handle one signal (the signature of a `signal.signal` handler)."""
+        now = self._clock()
+        if self.signum is None:
+            self.signum, self._first = signum, now
+        elif not self.stopping and now - self._first >= self._force_after_s:
+            self.stopping = True
+            raise KeyboardInterrupt
+
+
+class _Waker:
+    """
+    Wake a spinning executor when a signal arrives.
+
+    Python runs signal handlers between bytecodes only, and the executor waits inside
+    rcl; the interpreter's C-level handler writes the signal number to the wake-up fd,
+    and this thread turns that into a guard condition of the node.
+    """
+
+    def __init__(self, guard):
+        self._read, self._write = socket.socketpair()
+        self._write.setblocking(False)
+        self._previous = signal.set_wakeup_fd(self._write.fileno(), warn_on_full_buffer=False)
+        self._thread = threading.Thread(target=self._run, args=(guard,), daemon=True,
+                                        name='fpc_gripper-signal-waker')
+        self._thread.start()
+
+    def _run(self, guard):
+        while self._read.recv(64):
+            guard.trigger()
+
+    def close(self):
+        signal.set_wakeup_fd(self._previous)
+        self._write.close()
+        self._thread.join(timeout=1.0)
+        self._read.close()
+
+
+def run_node(build, name, args=None):
+    """
+    Build a node, spin it until SIGINT or SIGTERM, then destroy it and shut rclpy down.
+
+    rclpy's own signal handlers are not installed: they shut the context down from
+    another thread while a callback may still be publishing, and then raise
+    KeyboardInterrupt wherever the main thread happens to be (``destroy_node`` included),
+    which is what printed tracebacks under ``ros2 launch``. Here a signal only asks for a
+    stop (see `StopRequest`); the running callback finishes, the node is destroyed (so
+    the recorder closes its file and the bridge vents), and only then is the context
+    shut down.
+
+    Parameters
+    ----------
+    build : callable
+        ``build()`` returns the node; called after ``rclpy.init``.
+    name : str
+        Logger name for a failed start.
+    args : list of str, optional
+        Command-line arguments for ``rclpy.init`` (default ``sys.argv``).
+
+    Returns
+    -------
+    int
+        0 after a stop signal or an external shutdown, 1 when the node could not start
+        (one fatal log line names the reason).
+
+    """
+    stop = StopRequest()
+    previous = {signum: signal.signal(signum, stop) for signum in _STOP_SIGNALS}
+    node = executor = waker = None
+    try:
+        try:
+            rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+            node = build()
+        except (*START_ERRORS, RCLError) as exc:
+            # RCLError: rcl refused the command line (say a --params-file it cannot parse).
+            get_logger(name).fatal(f'cannot start: {exc}')
+            return 1
+        executor = SingleThreadedExecutor()
+        executor.add_node(node)
+        waker = _Waker(node.create_guard_condition(lambda: None))
+        while not stop.requested and rclpy.ok():
+            executor.spin_once()
+    except ExternalShutdownException:
+        # Someone shut the context down (rclpy.shutdown()): a stop like any other.
+        pass
+    except KeyboardInterrupt:
+        # A forced stop (see StopRequest): the node is destroyed as after any other.
+        get_logger(name).warning('stop forced: a callback that did not finish was interrupted')
+    finally:
+        stop.stopping = True
+        if waker is not None:
+            waker.close()
+        if executor is not None:
+            executor.shutdown()
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
+    return 0

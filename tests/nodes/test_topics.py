@@ -1,0 +1,86 @@
+"""The README's topic table against every publisher and subscription the nodes create."""
+
+import pathlib
+import re
+
+import pytest
+import rclpy
+from rclpy.context import Context
+from rclpy.parameter import Parameter
+from rclpy.qos import DurabilityPolicy
+from rclpy.qos import ReliabilityPolicy
+
+from fpc_gripper.nodes.gripper_controller import GripperController
+from fpc_gripper.nodes.model_node import ModelNode
+from fpc_gripper.nodes.regulator_bridge import RegulatorBridge
+
+ROOT = pathlib.Path(__file__).resolve().parents[2]
+# rclpy's own topics, not the package's.
+INFRASTRUCTURE = re.compile(r'^/(rosout|parameter_events)$|/transition_event$')
+_ROW = re.compile(r'^\| `(?P<topic>[^`]+)` \| (?P<type>[^|]+) \| (?P<nodes>[^|]+) \| '
+                  r'(?P<qos>[^|]+) \|$')
+_QOS = re.compile(r'^(reliable|best effort), (volatile|transient local), depth (\d+)')
+_RELIABILITY = {'reliable': ReliabilityPolicy.RELIABLE,
+                'best effort': ReliabilityPolicy.BEST_EFFORT}
+_DURABILITY = {'volatile': DurabilityPolicy.VOLATILE,
+               'transient local': DurabilityPolicy.TRANSIENT_LOCAL}
+
+
+def readme_table():
+    """Rows of the README's 'Topics and QoS' table: topic -> (type, nodes, QoS)."""
+    text = (ROOT / 'README.md').read_text()
+    section = text.split('### Topics and QoS\n', 1)[1].strip().split('\n\n', 1)[0]
+    rows = {}
+    for line in section.splitlines()[2:]:
+        match = _ROW.match(line)
+        assert match, f'not a table row: {line!r}'
+        reliability, durability, depth = _QOS.match(match['qos']).groups()
+        rows[match['topic']] = (match['type'].strip(), match['nodes'],
+                                (_RELIABILITY[reliability], _DURABILITY[durability],
+                                 int(depth)))
+    return rows
+
+
+@pytest.fixture(scope='module')
+def nodes():
+    context = Context()
+    rclpy.init(context=context)
+    built = [ModelNode(context=context, namespace='/cmd'),
+             ModelNode(context=context, namespace='/meas', parameter_overrides=[
+                 Parameter('pressure_input', value='measured')]),
+             RegulatorBridge.create_active(context=context, namespace='/cmd'),
+             GripperController(context=context, namespace='/cmd')]
+    yield built
+    for node in built:
+        node.destroy_node()
+    context.try_shutdown()
+
+
+def _endpoints(node):
+    for kind, entities in (('pub', node.publishers), ('sub', node.subscriptions)):
+        for entity in entities:
+            if not INFRASTRUCTURE.search(entity.topic_name):
+                msg = entity.msg_type
+                yield (kind, entity.topic_name, entity.qos_profile,
+                       f'{msg.__module__.split(".")[0]}/{msg.__name__}')
+
+
+@pytest.mark.ros
+def test_every_topic_is_in_the_readme_table_with_its_qos(nodes):
+    table = readme_table()
+    seen = set()
+    for node in nodes:
+        namespace = node.get_namespace()
+        for kind, topic, qos, msg_type in _endpoints(node):
+            relative = topic[len(namespace) + 1:] if topic.startswith(namespace + '/') \
+                else topic
+            name = re.sub(r'^finger_\d+/', 'finger_<i>/', relative)
+            assert name in table, f'{node.get_name()} {kind} {topic} is not in the README'
+            type_name, names, (reliability, durability, depth) = table[name]
+            where = f'{node.get_name()} {kind} {topic}'
+            assert node.get_name() in names and msg_type == type_name, where
+            assert (qos.reliability, qos.durability, qos.depth) == (
+                reliability, durability, depth), where
+            seen.add(name)
+    # Every row but /tf_static (tf2_ros is not on PyPI) belongs to a node here.
+    assert set(table) - seen == {'/tf_static'}
