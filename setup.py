@@ -31,6 +31,7 @@ setup(
             'gripper_controller = fpc_gripper.nodes.gripper_controller:main',
             'gripper_demo = fpc_gripper.nodes.gripper_demo:main',
             'fpc-mcap = fpc_gripper.io.cli:main',
+            'fpc-grasp = fpc_gripper.grasp.cli:main',
         ],
     },
 )
