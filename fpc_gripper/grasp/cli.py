@@ -142,7 +142,9 @@ def main(argv=None):
         print(f'{p.pressure * 1e-3:13.1f} {p.grasp_force:9.4f} {p.holding_force:10.4f} '
               f'{p.fingers_in_contact:7d}  {p.status.name}')
     best = sweep.best
-    if best is None or not math.isfinite(best.holding_force) or best.holding_force <= 0.0:
+    if best is None:
+        print('no grasp pressure was simulated to the end (see status)')
+    elif not math.isfinite(best.holding_force) or best.holding_force <= 0.0:
         print('no grasp pressure holds the object')
     else:
         print(f'best grasp pressure {best.pressure * 1e-3:.1f} kPa: holding force '

@@ -453,8 +453,8 @@ class ContactResult:
         Contact force on the finger [N].
     normal_force, tangential_force : ndarray, shape (C,)
         force . nu (>= 0) and force . tau [N].
-    line_load : ndarray, shape (C,)
-        Normal force over the point's tributary length [N/m].
+    line_load, tangential_line_load : ndarray, shape (C,)
+        Normal and tangential force over the point's tributary length [N/m].
     pair_status : ndarray of int, shape (C,)
         `contact_kernels` status (FREE, NORMAL, STICK, SLIP_POS, SLIP_NEG).
     in_contact : ndarray of bool, shape (C,)
@@ -516,6 +516,7 @@ class ContactResult:
         self.normal_force = np.einsum('ij,ij->i', self.force, self.normal)
         self.tangential_force = np.einsum('ij,ij->i', self.force, self.tangent)
         self.line_load = self.normal_force / points.weight[pair_point]
+        self.tangential_line_load = self.tangential_force / points.weight[pair_point]
         scale = solver.gradient_scale / solver.length
         self.in_contact = (self.pair_status != ck.FREE) & (self.normal_force > _FORCE_TOL
                                                            * scale)

@@ -1,4 +1,4 @@
-"""The one equilibrium engine: damped Newton, continuation and displacement control."""
+"""The one equilibrium engine: damped Newton, continuation, the bordered Newton of constraints."""
 
 import collections
 from dataclasses import dataclass
