@@ -30,6 +30,14 @@ def _above_palm(name, lowest):
                          f'{lowest:.4g} m along the palm axis, below the palm (0 m)')
 
 
+def _centre(diameter, center):
+    """Check a diameter and a centre height (default: resting on the palm) [m]."""
+    diameter = _positive('diameter', diameter)
+    center = 0.5 * diameter if center is None else real_number('center', center, '[m]')
+    _above_palm('center', center - 0.5 * diameter)
+    return diameter, center
+
+
 def _rectangle(x_low, x_high, half_width, palm_radius):
     """Section X in [x_low, x_high], |rho| <= half_width, as a polygon in the finger frame."""
     z_low, z_high = -palm_radius - half_width, -palm_radius + half_width
@@ -92,10 +100,7 @@ class Sphere:
 
     def __post_init__(self):
         """Check the size; the centre defaults to resting on the palm."""
-        diameter = _positive('diameter', self.diameter)
-        center = 0.5 * diameter if self.center is None else real_number('center', self.center,
-                                                                        '[m]')
-        _above_palm('center', center - 0.5 * diameter)
+        diameter, center = _centre(self.diameter, self.center)
         object.__setattr__(self, 'diameter', diameter)
         object.__setattr__(self, 'center', center)
 
@@ -141,10 +146,7 @@ class CrossCylinder:
 
     def __post_init__(self):
         """Check the sizes and that it clears the palm."""
-        diameter = _positive('diameter', self.diameter)
-        center = 0.5 * diameter if self.center is None else real_number('center', self.center,
-                                                                        '[m]')
-        _above_palm('center', center - 0.5 * diameter)
+        diameter, center = _centre(self.diameter, self.center)
         object.__setattr__(self, 'diameter', diameter)
         object.__setattr__(self, 'length', _positive('length', self.length))
         object.__setattr__(self, 'center', center)

@@ -1,6 +1,7 @@
 """Finger-object contact: rigid planar obstacles, frictionless or with Coulomb friction."""
 
 from dataclasses import dataclass
+import functools
 import math
 
 import numpy as np
@@ -327,10 +328,22 @@ def finger_points(solver, settings=ContactSettings()):
     if not isinstance(settings, ContactSettings):
         raise TypeError(f'`settings` must be a ContactSettings, got '
                         f'{type(settings).__name__}')
+    _check_solver(solver)
+    # A function of the solver's edges and the settings: built once per solver.
+    memo = solver.__dict__.setdefault('_contact_points', {})
+    if settings not in memo:
+        memo[settings] = _finger_points(solver, settings)
+    return memo[settings]
+
+
+def _check_solver(solver):
     if not hasattr(solver, 'point_jacobian'):
         raise TypeError(f'contact needs a finger model with face points (PCCSolver or '
                         f'RodSolver, e.g. `pipeline.contact_model`), got '
                         f'{type(solver).__name__}')
+
+
+def _finger_points(solver, settings):
     edges = np.asarray(solver.edges, dtype=float)
     lengths = np.diff(edges)
     m = settings.points_per_segment
@@ -381,8 +394,9 @@ def _contact_set(solver, points, obstacles, mu, penalty):
     count = points.s.size * len(obstacles)
     compliance = 0.0 if penalty == 0.0 else 1.0 / penalty
     return engine.ContactSet(
-        points.segment.astype(np.int64), points.offset.astype(float),
-        points.height.astype(float), kind, params,
+        np.ascontiguousarray(points.segment, dtype=np.int64),
+        np.ascontiguousarray(points.offset, dtype=float),
+        np.ascontiguousarray(points.height, dtype=float), kind, params,
         np.repeat(np.arange(points.s.size), len(obstacles)).astype(np.int64),
         np.tile(np.arange(len(obstacles)), points.s.size).astype(np.int64),
         np.zeros(count, dtype=np.int64), np.zeros((count, 2)), float(mu), compliance,
@@ -484,39 +498,24 @@ class ContactResult:
         self.mu = float(mu)
         self.points = points
         self.obstacles = tuple(obstacles)
-        self._params = params
         self.state = (outcome.x, outcome.multipliers, outcome.pair_status)
         self.anchors = outcome.anchors
-        self.finger = solver._result(outcome.x, outcome.status, outcome.iterations, 0.0, 0.0,
-                                     outcome.stability, outcome.fraction, pressure, list(loads),
-                                     tip_force)
+        self.fraction = outcome.fraction
+        self.stability = outcome.stability
+        self._finger = (outcome, list(loads), tip_force)
         count = len(self.obstacles)
-        pair_point = np.repeat(np.arange(points.s.size), count)
+        self._pair_point = np.repeat(np.arange(points.s.size), count)
         self.obstacle = np.tile(np.arange(count), points.s.size)
-        self.s = points.s[pair_point]
-        self.face = points.face[pair_point]
         self.pair_status = np.asarray(outcome.pair_status)
         positions = solver.point_positions(outcome.x, points.segment, points.offset,
                                            points.height)
-        self.position = positions[pair_point]
-        self.tip = np.asarray(solver.node_jacobian(outcome.x, solver.tip_node)[0])
-        kind, _ = _params(self.obstacles)
-        geometry = ck.pair_geometry(kind, np.ascontiguousarray(params, dtype=float),
-                                    positions, pair_point, self.obstacle)
-        self.gap = geometry[:, 0]
-        self.normal = geometry[:, 1:3]
-        self.tangent = np.stack([-self.normal[:, 1], self.normal[:, 0]], axis=1)
-        lam = np.asarray(outcome.multipliers)
-        sense = np.select([self.pair_status == ck.SLIP_POS, self.pair_status == ck.SLIP_NEG],
-                          [self.mu, -self.mu], 0.0)
-        # The multiplier of a touching pair scales grad g, of length geometry[:, 3].
-        along = (lam[:, :1] * geometry[:, 3:4]) * (self.normal + sense[:, None] * self.tangent)
-        self.force = np.where((self.pair_status == ck.STICK)[:, None], lam, along)
-        self.force[self.pair_status == ck.FREE] = 0.0
-        self.normal_force = np.einsum('ij,ij->i', self.force, self.normal)
-        self.tangential_force = np.einsum('ij,ij->i', self.force, self.tangent)
-        self.line_load = self.normal_force / points.weight[pair_point]
-        self.tangential_line_load = self.tangential_force / points.weight[pair_point]
+        self.position = positions[self._pair_point]
+        (self.gap, self.normal, self.force, self.normal_force,
+         self.tangential_force) = ck.pair_forces(
+            np.array([o.kind for o in self.obstacles], dtype=np.int64),
+            np.ascontiguousarray(params, dtype=float), positions, self._pair_point,
+            self.obstacle, self.pair_status, np.ascontiguousarray(outcome.multipliers),
+            self.mu)
         scale = solver.gradient_scale / solver.length
         self.in_contact = (self.pair_status != ck.FREE) & (self.normal_force > _FORCE_TOL
                                                            * scale)
@@ -524,18 +523,55 @@ class ContactResult:
         on_finger = np.zeros((count, 2))
         np.add.at(on_finger, self.obstacle, self.force)
         self.total_force = -on_finger
-        self.total_moment = np.zeros(count)
+        self.normal_force_total = float(self.normal_force[self.in_contact].sum())
+
+    # Built on first use: a path of many steps reads forces, rarely these.
+    s = property(lambda self: self.points.s[self._pair_point],
+                 doc="Reference arc length of every pair's point [m].")
+    face = property(lambda self: self.points.face[self._pair_point],
+                    doc="Face (index into FACES) of every pair's point.")
+    tangent = property(lambda self: np.stack([-self.normal[:, 1], self.normal[:, 0]], axis=1),
+                       doc='tau = (-nu_z, nu_x) of every pair.')
+    line_load = property(lambda self: self.normal_force / self.points.weight[self._pair_point],
+                         doc='Normal force over the tributary length [N/m].')
+    tangential_line_load = property(
+        lambda self: self.tangential_force / self.points.weight[self._pair_point],
+        doc='Tangential force over the tributary length [N/m].')
+
+    @functools.cached_property
+    def faces(self):
+        """Faces in contact."""
+        return tuple(FACES[f] for f in sorted(set(self.face[self.in_contact])))
+
+    @functools.cached_property
+    def total_moment(self):
+        """Moment of the finger's forces on each obstacle about its reference, +Y [N m]."""
+        out = np.zeros(len(self.obstacles))
         for b, obstacle in enumerate(self.obstacles):
             mine = self.obstacle == b
             arm = self.position[mine] - obstacle.reference
             reaction = -self.force[mine]
-            self.total_moment[b] = float(np.sum(arm[:, 1] * reaction[:, 0]
-                                                - arm[:, 0] * reaction[:, 1]))
-        self.normal_force_total = float(self.normal_force[self.in_contact].sum())
-        self.faces = tuple(FACES[f] for f in sorted(set(self.face[self.in_contact])))
-        self.arcs = self._arcs()
-        self.fraction = outcome.fraction
-        self.stability = outcome.stability
+            out[b] = float(np.sum(arm[:, 1] * reaction[:, 0] - arm[:, 0] * reaction[:, 1]))
+        return out
+
+    # Built on first use: a path of many steps reads forces, rarely these.
+    @functools.cached_property
+    def finger(self):
+        """The finger's result (`points`, `tangent`, `strains`...) at this state."""
+        outcome, loads, tip_force = self._finger
+        return self.solver._result(outcome.x, outcome.status, outcome.iterations, 0.0, 0.0,
+                                   outcome.stability, outcome.fraction, self.pressure, loads,
+                                   tip_force)
+
+    @functools.cached_property
+    def tip(self):
+        """Position of the midplane tip, (X, Z) [m]."""
+        return np.asarray(self.solver.node_jacobian(self.state[0], self.solver.tip_node)[0])
+
+    @functools.cached_property
+    def arcs(self):
+        """Runs of touching points (ContactArc), by obstacle and face."""
+        return self._arcs()
 
     def _arcs(self):
         arcs = []
@@ -613,7 +649,7 @@ def _check_solve(solver, pressure, tip_force):
     pressure = real_number('pressure', pressure, '[Pa]')
     if pressure < 0.0:
         raise ValueError(f'`pressure` must be >= 0 (gauge) [Pa], got {pressure}')
-    finger_points(solver, ContactSettings(points_per_segment=1))   # the solver check
+    _check_solver(solver)
     return pressure, np.array(real_pair('tip_force', tip_force, '[N]'))
 
 

@@ -8,7 +8,7 @@ import numpy as np
 
 __all__ = ['HALF_PLANE', 'CIRCLE', 'POLYGON', 'ELLIPSE', 'KIND_NAMES', 'signed_distance',
            'closest_point', 'FREE', 'NORMAL', 'STICK', 'SLIP_POS', 'SLIP_NEG', 'STATUS_NAMES',
-           'shifted_params', 'pair_geometry']
+           'shifted_params', 'pair_geometry', 'pair_forces']
 
 # Obstacle kinds and the layout of their parameter row (padded with zeros):
 #   HALF_PLANE  (nu_x, nu_z, c): the obstacle is {nu . p <= c}, nu its outward unit normal.
@@ -218,6 +218,63 @@ def pair_geometry(kind, params, positions, pair_point, pair_object):
         out[j, 0], out[j, 1], out[j, 2], out[j, 3] = g, gx / size, gz / size, size
         out[j, 4], out[j, 5] = closest_point(kind[b], params[b], px, pz)
     return out
+
+
+@numba.njit(cache=True, nogil=True)
+def pair_forces(kind, params, positions, pair_point, pair_object, status, lam, mu):
+    """
+    Gap, unit normal and contact force of every (point, obstacle) pair.
+
+    Parameters
+    ----------
+    kind, params, positions, pair_point, pair_object
+        As `pair_geometry`.
+    status : ndarray of int, shape (C,)
+    lam : ndarray, shape (C, 2)
+        Pair multipliers: (lambda, 0) touching (the force is lambda (I + sigma mu R)
+        grad g, sigma = +-1 slipping, 0 frictionless), the force itself when sticking.
+    mu : float
+
+    Returns
+    -------
+    gap : ndarray, shape (C,)
+        [m].
+    normal : ndarray, shape (C, 2)
+        grad g / |grad g|.
+    force : ndarray, shape (C, 2)
+        On the finger [N]; zero for free pairs.
+    normal_force, tangential_force : ndarray, shape (C,)
+        force . normal and force . (-normal_z, normal_x) [N].
+
+    """
+    count = pair_point.size
+    gap = np.empty(count)
+    normal = np.empty((count, 2))
+    force = np.zeros((count, 2))
+    along = np.zeros(count)
+    across = np.zeros(count)
+    for j in range(count):
+        k = pair_point[j]
+        b = pair_object[j]
+        g, gx, gz, _, _, _ = signed_distance(kind[b], params[b], positions[k, 0],
+                                             positions[k, 1])
+        size = math.hypot(gx, gz)
+        nx, nz = gx / size, gz / size
+        gap[j] = g
+        normal[j, 0], normal[j, 1] = nx, nz
+        s = status[j]
+        if s == FREE:
+            continue
+        if s == STICK:
+            fx, fz = lam[j, 0], lam[j, 1]
+        else:
+            sense = mu if s == SLIP_POS else (-mu if s == SLIP_NEG else 0.0)
+            fx = lam[j, 0] * (gx - sense * gz)
+            fz = lam[j, 0] * (gz + sense * gx)
+        force[j, 0], force[j, 1] = fx, fz
+        along[j] = fx * nx + fz * nz
+        across[j] = -fx * nz + fz * nx
+    return gap, normal, force, along, across
 
 
 def shifted_params(kind, params, shifts):

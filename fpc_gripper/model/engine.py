@@ -1171,9 +1171,11 @@ def _contact_stable(problem, x, lam_pairs, pressure, nodes, forces, con, offset)
 @register_jitable
 def _contact_grow(problem, x, depth, pressure, nodes, forces, con, options, cap):
     """
-    Grow the obstacles from their shapes offset by `depth` (the free finger's deepest
-    penetration, so that it touches them) to their true shapes, doubling or halving the
-    growth step (1/4 first, 1/256 smallest). Returns the tuple of `_contact`.
+    Grow the obstacles from their shapes offset by `depth` to their true shapes.
+
+    `depth` is the free finger's deepest penetration, so that it touches them at first;
+    the growth step doubles or halves (1/4 first, 1/256 smallest). Returns the tuple of
+    `_contact`.
     """
     con.status[:] = ck.FREE
     lam = np.zeros((con.status.size, 2))
@@ -1628,10 +1630,10 @@ def contact_solve(problem, pressure, loads, contact, options, initial=None, top=
     finger touches the obstacles (bisection between `pressure` and `top`) the pressure is
     released to `pressure` in steps of at most 10 kPa (halved on failure, down to 1/64),
     each a solve from the last. Where the finger touches at every pressure up to `top`
-    (or the release fails), the obstacles are grown instead from their shapes offset by the deepest penetration
-    (touching) to their true shapes in doubling or halving steps (1/4 first, 1/256
-    smallest). So the answer is a function of the inputs alone, and the one the finger
-    reaches by closing on the obstacles.
+    (or the release fails), the obstacles are grown instead from their shapes offset by
+    the deepest penetration (touching) to their true shapes in doubling or halving steps
+    (1/4 first, 1/256 smallest). So the answer is a function of the inputs alone, and the
+    one the finger reaches by closing on the obstacles.
 
     Parameters
     ----------

@@ -527,6 +527,15 @@ def node_jacobian_kernel(x, lengths, node):
 # -- face points: a material point at reference arc length sigma into segment i, at height z
 # from the midplane along its normal (docs/physics.md, section 13.2) ----------------------------
 @_jit
+def _face_angles(a, b, length, offset):
+    """Return f = sigma / L, phi = f (b - a), S(phi), S', S'' and the angles a + phi/2, a + phi."""
+    f = offset / length
+    phi = f * (b - a)
+    s0, s1, s2 = _sinc(phi)
+    return f, phi, s0, s1, s2, a + 0.5 * phi, a + phi
+
+
+@_jit
 def _face_offset(a, eps, b, length, offset, z):
     """
     Offset q of a face point from its segment's start node, and dq/d(a, eps, b).
@@ -541,15 +550,9 @@ def _face_offset(a, eps, b, length, offset, z):
         [m].
     dq : ndarray, shape (2, 3)
         Columns d/da, d/deps, d/db [m].
-    parts : tuple
-        (f, phi, S, S', S'', stretch sigma) for `_face_load`.
 
     """
-    f = offset / length
-    phi = f * (b - a)
-    s0, s1, s2 = _sinc(phi)
-    mid = a + 0.5 * phi
-    end = a + phi
+    f, phi, s0, s1, s2, mid, end = _face_angles(a, b, length, offset)
     cm, sm = math.cos(mid), math.sin(mid)
     ce, se = math.cos(end), math.sin(end)
     reach = (1.0 + eps) * offset
@@ -577,11 +580,7 @@ def _face_load(a, eps, b, length, offset, z, fx, fz, grad_h):
     grad_h (4, 3) receives the gradient (row 0) and the Hessian (rows 1..3) [J]; returns
     the potential [J].
     """
-    f = offset / length
-    phi = f * (b - a)
-    s0, s1, s2 = _sinc(phi)
-    mid = a + 0.5 * phi
-    end = a + phi
+    f, phi, s0, s1, s2, mid, end = _face_angles(a, b, length, offset)
     cm, sm = math.cos(mid), math.sin(mid)
     gu = fx * cm + fz * sm                     # F . u(mid)
     gn = -fx * sm + fz * cm                    # F . n(mid) = d(F . u)/d mid
