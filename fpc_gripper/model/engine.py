@@ -546,12 +546,15 @@ def _contact_rows(con, problem, x, lam, offset):
         # (friction mu times the normal force, along tau); the Hessian of g is kappa v v^T,
         # so dd/dp = kappa ((I + sigma R) v) v^T.
         dx, dz = gx - sigma * gz, gz + sigma * gx
+        ux, uz = vx - sigma * vz, vz + sigma * vx
         c[r] = g + offset
         comp[r] = con.compliance
-        grow[r] = gx * j0 + gz * j1
-        brow[r] = dx * j0 + dz * j1
-        urow[u] = (vx - sigma * vz) * j0 + (vz + sigma * vx) * j1
-        vrow[u] = vx * j0 + vz * j1
+        # One loop for the four rows (plain loops compile faster than array expressions).
+        for i in range(n):
+            grow[r, i] = gx * j0[i] + gz * j1[i]
+            brow[r, i] = dx * j0[i] + dz * j1[i]
+            urow[u, i] = ux * j0[i] + uz * j1[i]
+            vrow[u, i] = vx * j0[i] + vz * j1[i]
         coef[u] = lam[r] * kappa
         point[r] = k
         direction[r, 0], direction[r, 1] = dx, dz
@@ -694,7 +697,7 @@ def _dense_solve(mat, vec):
 
 @register_jitable
 def _positive_definite(mat):
-    """Whether a small symmetric matrix is positive definite (Cholesky, pivots > 0)."""
+    """Whether the symmetric part of a small matrix is positive definite (Cholesky)."""
     size = mat.shape[0]
     low = np.zeros((size, size))
     for j in range(size):
@@ -705,7 +708,7 @@ def _positive_definite(mat):
             return False
         low[j, j] = np.sqrt(total)
         for i in range(j + 1, size):
-            value = mat[i, j]
+            value = 0.5 * (mat[i, j] + mat[j, i])
             for k in range(j):
                 value -= low[i, k] * low[j, k]
             low[i, j] = value / low[j, j]
@@ -762,7 +765,6 @@ def _schur_contact(con, problem, hess, shape, a, yb, c, comp, lam, grow, urow, v
     size = q + m
     if size == 0:
         return a, np.zeros(0), True
-    rhs = -(c + comp * lam)
     mat = np.zeros((size, size))
     vec = np.empty(size)
     ga = _times(grow, a)
@@ -778,7 +780,7 @@ def _schur_contact(con, problem, hess, shape, a, yb, c, comp, lam, grow, urow, v
         for k in range(m):
             mat[i, q + k] = -coef[i] * vb[i, k]
     for i in range(m):
-        vec[q + i] = rhs[i] - ga[i]
+        vec[q + i] = -(c[i] + comp[i] * lam[i]) - ga[i]
         for k in range(q):
             mat[q + i, k] = gu[i, k]
         for k in range(m):
@@ -786,8 +788,13 @@ def _schur_contact(con, problem, hess, shape, a, yb, c, comp, lam, grow, urow, v
     sol, ok = _dense_solve(mat, vec)
     if not ok:
         return a, np.zeros(m), False
-    dx = a + _times(yb, sol[q:]) + _times(yu, sol[:q])
-    return dx, sol[q:].copy(), np.all(np.isfinite(sol))
+    dx = a.copy()
+    for i in range(dx.size):
+        for k in range(m):
+            dx[i] += yb[i, k] * sol[q + k]
+        for k in range(q):
+            dx[i] += yu[i, k] * sol[k]
+    return dx, sol[q:].copy(), np.isfinite(_max_abs(sol))
 
 
 def _schur(con, problem, hess, shape, a, yb, c, comp, lam, grow, urow, vrow, coef):
@@ -900,15 +907,15 @@ def _constrained_newton(problem, x, lam, pressure, nodes, forces, con, offset, o
         if not ok:
             return x, lam, False, iteration
         dx = dx.reshape(x.shape)
-        step = np.abs(dx).max() if dx.size else 0.0
+        step = _max_abs(dx)
         if not np.isfinite(step):
             return x, lam, False, iteration
-        if (np.abs(dx) / cap).max() > 1.0:
+        if _max_ratio(dx, cap) > 1.0:
             return x, lam, False, iteration
         gap = 0.0
         for k in range(c.size):
             gap = max(gap, abs(c[k] + comp[k] * lam[k]))
-        balanced = not np.isfinite(gtol) or np.abs(residual).max() / scale <= gtol
+        balanced = not np.isfinite(gtol) or _max_abs(residual) / scale <= gtol
         if balanced and step <= xtol and gap <= 1e-12 * con.scale:
             return x + dx, lam + dlam, True, iteration
         before = _merit(residual, c, comp, lam, scale, con.scale)
@@ -1142,12 +1149,14 @@ def _contact_stable(problem, x, lam_pairs, pressure, nodes, forces, con, offset)
     yv, ok_v = _columns(problem, hess, vrow, residual.shape)
     if not (ok_g and ok_v):
         return 0.0
-    root = np.sqrt(np.maximum(coef, 0.0))
+    root = np.empty(q)
+    for i in range(q):
+        root[i] = np.sqrt(max(coef[i], 0.0))
     # -S22 = E + G H^-1 G^T, positive definite for independent rows.
     neg = _times(grow, yg)
     for i in range(m):
         neg[i, i] += comp[i]
-    if not _positive_definite(0.5 * (neg + neg.T)):
+    if not _positive_definite(neg):
         return -1.0
     # S11 - S12 S22^-1 S21 = S11 + S12 (-S22)^-1 S21, S12 = -A^1/2 V H^-1 G^T.
     vv = _times(vrow, yv)
@@ -1165,7 +1174,7 @@ def _contact_stable(problem, x, lam_pairs, pressure, nodes, forces, con, offset)
             for r in range(m):
                 total += root[i] * vg[i, r] * column[r]
             schur[i, k] += total
-    return 1.0 if _positive_definite(0.5 * (schur + schur.T)) else -1.0
+    return 1.0 if _positive_definite(schur) else -1.0
 
 
 @register_jitable
@@ -1302,7 +1311,10 @@ def _rigidity_entry(problem, x, pressure, node, direction, displacement, options
     return _rigidity(problem, x, pressure, node, direction, displacement, options, cap)
 
 
-@_jit
+# numpy's error model (a division by zero gives inf or nan, which the loops test for) keeps
+# the many divisions of the contact code free of exception paths: it compiles in less time.
+@_cached
+@numba.njit(cache=True, nogil=True, error_model='numpy')
 def _contact_entry(problem, x, lam, status, depth, pressure, nodes, forces, con, options, cap,
                    grow):
     return _contact(problem, x, lam, status, depth, pressure, nodes, forces, con, options, cap,
