@@ -285,6 +285,11 @@ class _Finger:
         self.phase = phase
         self.estimated = None
 
+    def __deepcopy__(self, memo):
+        # Numbers, an enum and a FingerGrasp whose caches are pure: the step's undo copy
+        # can share the last.
+        return copy.copy(self)
+
 
 class GripperControlLaw:
     """

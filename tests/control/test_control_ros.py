@@ -11,6 +11,7 @@ from geometry_msgs.msg import WrenchStamped
 import numpy as np
 import pytest
 import rclpy
+from rclpy.exceptions import ParameterException
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from rclpy.qos import qos_profile_sensor_data
@@ -303,6 +304,18 @@ def test_grasp_on_a_virtual_object_reaches_the_total_normal_force(rig):
     assert np.mean(published) == pytest.approx(force / 3, rel=0.10)
     assert float(r.state()['normal_force_n']) == pytest.approx(force, rel=0.10)
     assert r.max_command() <= CONFIG.max_pressure
+
+
+def test_a_bad_object_is_refused_naming_it(ros):
+    context, _ = ros
+    for bad, word in (('cone', 'object'), ('sphere', 'diameter')):
+        overrides = [Parameter('object', value=bad)]
+        if bad == 'sphere':
+            # A NaN size is refused, by the parameter's range or by the object itself.
+            overrides.append(Parameter('object_diameter', value=float('nan')))
+        with pytest.raises((ValueError, ParameterException), match=word):
+            GripperController(namespace=f'/gc{next(_counter)}', context=context,
+                              parameter_overrides=overrides)
 
 
 def test_parameters_are_validated(ros):
