@@ -34,6 +34,7 @@ setup(
             'gripper_demo = fpc_gripper.nodes.gripper_demo:main',
             'fpc-mcap = fpc_gripper.io.cli:main',
             'fpc-calibrate = fpc_gripper.calibration.cli:main',
+            'fpc-grasp = fpc_gripper.grasp.cli:main',
         ],
     },
 )

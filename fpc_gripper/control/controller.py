@@ -1,6 +1,5 @@
 """Gripper control law: model-inverse feedforward plus PI feedback, slew and range limits."""
 
-import collections
 import copy
 from dataclasses import dataclass, field, fields
 import enum
@@ -8,18 +7,18 @@ import math
 
 import numpy as np
 
+from fpc_gripper.grasp.finger import FingerGrasp
+from fpc_gripper.grasp.objects import CoaxialCylinder
+
 from .geometry import PalmGeometry
 
 __all__ = ['ControllerConfig', 'ControlOutput', 'FingerMeasurement', 'FingerOutput',
            'FingerPhase', 'GoalStatus', 'GripperControlLaw', 'Level', 'Mode', 'SAFE_STATES']
 
 SAFE_STATES = ('vent', 'hold')
-#: A contact radius is re-estimated when the tip radius moves by more than this [m]
-#: while the finger is quasi-static (the pressure moved less than _STATIC_RATE_PA_S on
-#: average over the last _STATIC_WINDOW_S).
-_CONTACT_HYSTERESIS = 0.5e-3
-_STATIC_WINDOW_S = 0.2
-_STATIC_RATE_PA_S = 15.0e3
+#: The force-to-pressure slope is taken at the measured pressure rounded to this [Pa]: a
+#: function of the measurement alone, and one pair of contact solves per window.
+_SLOPE_WINDOW = 4.0e3
 #: Longest step the integrators and the slew limit accept [s]; a longer gap is a restart.
 _MAX_DT = 0.2
 
@@ -76,16 +75,17 @@ class ControllerConfig:
         PI gains on the pressure-equivalent aperture error e = (rho* - rho) / (drho/dP)
         [-] and [1/s].
     kp_force, ki_force : float
-        PI gains on the pressure-equivalent force error e = (dP/dp0)|rho (F* - p0)
-        [-] and [1/s].
+        PI gains on the pressure-equivalent force error e = (dP/dN) (N*/n - N_i) of
+        each finger (N*: the total normal force goal, n fingers, N_i the finger's
+        estimated normal force) [-] and [1/s].
     anti_windup : bool
         Conditional integration (clamping); False only to show what it prevents.
     goal_tolerance_m : float
         Aperture tolerance [m].
     force_tolerance : float
-        Relative contact-force tolerance [-].
+        Relative tolerance of each finger's normal force [-].
     force_tolerance_n : float
-        Absolute floor of the contact-force tolerance [N].
+        Absolute floor of that tolerance [N].
     settle_time_s : float
         Time the error must stay within tolerance before the goal is reached [s].
     stall_timeout_s : float
@@ -95,7 +95,7 @@ class ControllerConfig:
     safe_state : {'vent', 'hold'}
         Command on lost feedback: 0 Pa gauge, or the last command.
     contact_threshold_n : float
-        Tip force along +Z above which a finger is in contact [N].
+        Normal contact force above which a finger is in contact [N].
 
     """
 
@@ -168,7 +168,9 @@ class FingerMeasurement:
     stamp : float or None
         Time that reading arrived [s], on the clock `step` is given.
     tip_force : tuple of float
-        Latest tip-force estimate (f0, p0) [N].
+        Latest measured contact force on the finger (F_X, F_Z), the resultant of its
+        contact loads in its frame (topic ``finger_<i>/tip_force``) [N]; out of contact,
+        a tip load.
 
     """
 
@@ -198,7 +200,7 @@ class FingerOutput:
     saturated : bool
         The command hit the range or slew limit, or the target is out of reach.
     contact_force : float
-        p0 estimate [N].
+        Estimated normal force of the object on the finger [N] (see `GripperControlLaw`).
 
     """
 
@@ -232,7 +234,7 @@ class ControlOutput:
     aperture_target : float
         [m] (nan when grasping).
     force_target : float
-        [N] (nan unless grasping).
+        Total normal force goal on the object [N] (nan unless grasping).
     fingers : tuple of FingerOutput
 
     """
@@ -247,6 +249,16 @@ class ControlOutput:
     aperture_target: float
     force_target: float
     fingers: tuple = field(default=())
+
+    @property
+    def normal_force(self):
+        """Estimated total normal force on the object [N]: the fingers' sum."""
+        return float(sum(f.contact_force for f in self.fingers))
+
+
+def _magnitude(measurement):
+    """Magnitude of a measured contact force [N]."""
+    return math.hypot(*(float(v) for v in measurement.tip_force))
 
 
 def _real(name, value, unit):
@@ -265,33 +277,18 @@ class _Finger:
         self.integral = 0.0
         self.command = None
         self.phase = FingerPhase.FREE
-        self.contact_rho = math.nan
-        self.history = collections.deque()
-        self.quasi_static = False
-
-    def track(self, now, pressure):
-        """
-        Keep the measured pressures of the last `_STATIC_WINDOW_S`.
-
-        The finger is quasi-static when the pressure moved less than
-        `_STATIC_RATE_PA_S` on average over that window: then the tip-force estimate,
-        which comes later through other nodes, is consistent with the pressure.
-        """
-        if pressure is None or not math.isfinite(pressure):
-            self.quasi_static = False
-            return
-        self.history.append((now, pressure))
-        while self.history and now - self.history[0][0] > _STATIC_WINDOW_S:
-            self.history.popleft()
-        start, old = self.history[0]
-        span = now - start
-        self.quasi_static = span >= 0.5 * _STATIC_WINDOW_S and \
-            abs(pressure - old) <= _STATIC_RATE_PA_S * span
+        # The object of an unknown-object grasp, estimated at contact (a FingerGrasp).
+        self.estimated = None
 
     def reset(self, phase):
         self.integral = 0.0
         self.phase = phase
-        self.contact_rho = math.nan
+        self.estimated = None
+
+    def __deepcopy__(self, memo):
+        # Numbers, an enum and a FingerGrasp whose caches are pure: the step's undo copy
+        # can share the last.
+        return copy.copy(self)
 
 
 class GripperControlLaw:
@@ -304,16 +301,23 @@ class GripperControlLaw:
       unloaded root find P0(rho*) (cached), shifted for the current tip load by the
       monotone map: P_ff = P0(rho*) + M^-1(rho* - delta) - M^-1(rho*), where delta =
       rho_est - M(P_meas) is the displacement the load causes at the measured state
-      (exact at steady state, no loaded root find per step). When holding a contact
-      force F* on an object: P with rho(P, (0, F*)) = D/2, D/2 being the tip radius
-      estimated at contact (a loaded root find, once per contact radius);
+      (exact at steady state, no loaded root find per step). When holding a grasp of
+      total normal force N* on an object: the pressure at which the finger's
+      frictionless contact with the object (`FingerGrasp`: the contact model, the
+      object's section in the finger's plane) has the normal force N*/n, a root find
+      cached per goal;
     - error e [Pa]: the aperture error converted to pressure by the model slope,
       (rho* - rho_est) / s with s the secant of the map between P_meas and P_ff
-      scaled to the loaded local slope, or the force error converted by the model's
-      dP/dp0 at constant rho, (dP/dp0) (F* - p0_est). rho_est is the model at the
-      measured pressure and load. Expressing both errors in Pa makes one pair of
-      dimensionless gains valid over the whole range although drho/dP varies tenfold
-      (gain scheduling by the model);
+      scaled to the loaded local slope, or the force error converted by the contact
+      model's slope, (N*/n - N_est) / (dN/dP). rho_est is the model at the measured
+      pressure and load. Expressing both errors in Pa makes one pair of dimensionless
+      gains valid over the whole range although drho/dP varies tenfold (gain scheduling
+      by the model);
+    - the normal-force estimate N_est of a finger is its measured contact force |F|
+      (``tip_force``: the resultant of the contact loads on the finger) times the
+      contact model's ratio of the summed normal forces to their resultant at the
+      measured pressure: exact for one contact point, and for an arc whose normals
+      spread it restores what the resultant loses;
     - u_raw = P_ff + kp e + I; u = clip(u_raw, 0, max_pressure), then limited to
       slew_rate_pa_s (approach_rate_pa_s while closing on and pressing an object);
     - anti-windup by clamping (conditional integration): dI/dt = ki e, except while
@@ -321,9 +325,12 @@ class GripperControlLaw:
       (Back-calculation was tried: with the P term on a stuck reading it drives I far
       negative and the release undershoots by half the step.)
 
-    A grasp closes each finger towards 0 Pa until its tip force exceeds
-    `contact_threshold_n`, then regulates that force. A goal is REACHED after its
-    error stays within tolerance for `settle_time_s`, STALLED if not reached within
+    A grasp closes each finger towards 0 Pa until its normal force exceeds
+    `contact_threshold_n`, then regulates it to N*/n. Without a known object
+    (`grasps` None) the object is taken as a cylinder on the palm axis whose surface
+    passes through the finger's inner-face tip corner at the pressure contact was felt.
+    A goal is REACHED after its error stays within tolerance for `settle_time_s`,
+    STALLED if not reached within
     `stall_timeout_s` (control goes on). When the newest pressure reading of any
     finger is older than `feedback_timeout_s` (or none arrived within that time
     after the goal started), the law enters SAFE: it commands 0 Pa ('vent') or
@@ -335,10 +342,12 @@ class GripperControlLaw:
         One per finger (fingers of the same design may share one).
     geometry : PalmGeometry
     config : ControllerConfig
+    grasps : sequence of FingerGrasp, optional
+        Each finger's contact with the object to grasp, when the object is known.
 
     """
 
-    def __init__(self, models, geometry, config=ControllerConfig()):
+    def __init__(self, models, geometry, config=ControllerConfig(), grasps=None):
         if not isinstance(geometry, PalmGeometry):
             raise TypeError(f'`geometry` must be a PalmGeometry, got {type(geometry).__name__}')
         if not isinstance(config, ControllerConfig):
@@ -349,6 +358,13 @@ class GripperControlLaw:
                              f'got {len(self.models)}')
         self.geometry = geometry
         self.config = config
+        if grasps is not None:
+            grasps = tuple(grasps)
+            if len(grasps) != len(self.models):
+                raise ValueError(f'`grasps` must hold one FingerGrasp per finger '
+                                 f'({len(self.models)}), got {len(grasps)}')
+        self.grasps = grasps
+        self._slopes = {}
         self._fingers = [_Finger() for _ in self.models]
         self.mode = Mode.IDLE
         self.status = GoalStatus.NONE
@@ -424,12 +440,13 @@ class GripperControlLaw:
 
     def set_grasp_force(self, force, now):
         """
-        Close on an object and hold a contact force on every fingertip.
+        Close on the object and hold a total normal force on it.
 
         Parameters
         ----------
         force : float
-            Contact force per fingertip [N], > 0.
+            Total normal force of the fingers on the object [N], > 0: each finger
+            presses with force / n.
         now : float
             [s].
 
@@ -442,7 +459,7 @@ class GripperControlLaw:
         self._aperture_target = math.nan
         self._out_of_range = ''
         self._start_goal(now, Mode.GRASP, FingerPhase.APPROACH)
-        self._message = f'grasp goal {force:.3f} N per fingertip: closing'
+        self._message = f'grasp goal {force:.3f} N on the object: closing'
 
     # -- the step -------------------------------------------------------------------------
 
@@ -491,7 +508,7 @@ class GripperControlLaw:
             commands=held, aperture=math.nan, aperture_target=self._aperture_target,
             force_target=self._force_target, fingers=tuple(
                 FingerOutput(math.nan if c is None else c, math.nan, math.nan, f.integral,
-                             math.nan, f.phase, False, m.tip_force[1])
+                             math.nan, f.phase, False, _magnitude(m))
                 for c, f, m in zip(commands, self._fingers, measurements)))
 
     def _step(self, now, measurements):
@@ -511,7 +528,7 @@ class GripperControlLaw:
         if self.mode is Mode.IDLE:
             return self._output(now, None, aperture, [
                 FingerOutput(math.nan, math.nan, math.nan, 0.0, r, f.phase, False,
-                             m.tip_force[1])
+                             _magnitude(m))
                 for r, f, m in zip(rhos, self._fingers, measurements)])
         if self.mode is Mode.SAFE:
             commands = []
@@ -522,7 +539,7 @@ class GripperControlLaw:
                 commands.append(finger.command)
             return self._output(now, tuple(commands), aperture, [
                 FingerOutput(c, math.nan, math.nan, f.integral, r, f.phase, False,
-                             m.tip_force[1])
+                             _magnitude(m))
                 for c, r, f, m in zip(commands, rhos, self._fingers, measurements)])
         outputs = [self._finger_step(i, now, dt, m, est)
                    for i, (m, est) in enumerate(zip(measurements, estimates))]
@@ -559,30 +576,26 @@ class GripperControlLaw:
         finger = self._fingers[index]
         rho, lin = estimate
         pressure = measurement.pressure
-        f0, p0 = (float(v) for v in measurement.tip_force)
         if finger.command is None:
             start = 0.0 if pressure is None else pressure
             finger.command = min(max(start, 0.0), self.max_pressure)
         rate = cfg.slew_rate_pa_s
-        finger.track(now, pressure)
-        if finger.phase is FingerPhase.APPROACH and p0 >= cfg.contact_threshold_n \
-                and math.isfinite(rho):
+        normal = self._normal_force(index, measurement)
+        if finger.phase is FingerPhase.APPROACH and normal >= cfg.contact_threshold_n \
+                and pressure is not None:
             finger.reset(FingerPhase.CONTACT)
-        elif finger.phase is FingerPhase.CONTACT and p0 < 0.5 * cfg.contact_threshold_n:
+            if self.grasps is None:
+                finger.estimated = self._estimated_object(index, pressure)
+        elif finger.phase is FingerPhase.CONTACT and normal < 0.5 * cfg.contact_threshold_n:
             finger.reset(FingerPhase.APPROACH)
         if finger.phase is FingerPhase.CONTACT:
-            # The object holds the tip, so its radius is the tip radius at contact; it is
-            # re-estimated only when it moves by more than the hysteresis (each new value
-            # costs one root find).
-            if not math.isfinite(finger.contact_rho) or (
-                    math.isfinite(rho) and finger.quasi_static
-                    and abs(rho - finger.contact_rho) > _CONTACT_HYSTERESIS):
-                finger.contact_rho = rho
+            grasp = self._grasp(index)
             rate = min(rate, cfg.approach_rate_pa_s)
-            ff = model.pressure_for_grasp(2.0 * finger.contact_rho, self._force_target)
-            feedforward, reachable = ff.x, ff.success
+            share = self._force_target / len(self.models)
+            feedforward, reachable = self._grasp_pressure(index, grasp, share)
             gain_p, gain_i = cfg.kp_force, cfg.ki_force
-            error = lin.dp_dforce * (self._force_target - p0) if lin is not None else 0.0
+            slope = self._force_slope(index, grasp, pressure)
+            error = (share - normal) / slope if slope < 0.0 else 0.0
         else:
             if finger.phase is FingerPhase.APPROACH:
                 target = model.rho_range[0]
@@ -611,7 +624,69 @@ class GripperControlLaw:
         finger.command = command
         saturated = (command != raw) or not reachable
         return FingerOutput(command, feedforward, error, finger.integral, rho, finger.phase,
-                            saturated, p0)
+                            saturated, normal)
+
+    def _grasp(self, index):
+        """Return a finger's FingerGrasp: the known object's, or the one estimated at contact."""
+        if self.grasps is not None:
+            return self.grasps[index]
+        return self._fingers[index].estimated
+
+    def _normal_force(self, index, measurement):
+        """
+        Estimated normal force of the object on a finger [N].
+
+        The measured contact force |F| times the contact model's ratio of the summed
+        normal forces to their resultant at the measured pressure (1 for one contact
+        point); |F| itself where no contact model applies yet.
+        """
+        force = _magnitude(measurement)
+        grasp = self._grasp(index)
+        pressure = measurement.pressure
+        if grasp is None or force == 0.0 or pressure is None or not math.isfinite(pressure):
+            return force
+        state = grasp.state(pressure)
+        resultant = math.hypot(*state.total_force.sum(axis=0))
+        if state.normal_force_total <= 0.0 or resultant <= 1e-12:
+            return force
+        return force * state.normal_force_total / resultant
+
+    def _estimated_object(self, index, pressure):
+        """
+        Return the FingerGrasp of an unknown object, estimated at contact.
+
+        A cylinder on the palm axis through the finger's inner-face tip corner, free, at
+        the pressure where contact was felt.
+        """
+        model = self.models[index]
+        solver = FingerGrasp.solver_of(model.design, model.settings)
+        free = solver.solve(min(max(pressure, 0.0), model.max_pressure))
+        if not free.success:
+            raise RuntimeError(f'finger {index}: no free state at {pressure:.0f} Pa: '
+                               f'{free.message}')
+        corner = solver.point_positions(solver._pack(free.state), [solver.n_segments - 1],
+                                        [solver.lengths[-1]], [-0.5 * model.design.H])[0]
+        radius = self.geometry.palm_radius + corner[1]
+        section = CoaxialCylinder(2.0 * radius).section(self.geometry.mount_angles[index],
+                                                        self.geometry.palm_radius)
+        return FingerGrasp(model.design, section, model.max_pressure, model.settings)
+
+    def _grasp_pressure(self, index, grasp, force):
+        """Pressure at which a finger presses with `force` [N] (cached per grasp and goal)."""
+        key = (index, id(grasp), force)
+        hit = self._slopes.get(key)
+        if hit is None or hit[0] is not grasp:
+            hit = self._slopes[key] = (grasp, grasp.pressure_for_force(force))
+        return hit[1]
+
+    def _force_slope(self, index, grasp, pressure):
+        """dN/dP of a finger's contact [N/Pa] at the measured pressure, window-rounded."""
+        window = round(min(max(pressure, 0.0), grasp.max_pressure) / _SLOPE_WINDOW)
+        key = (index, id(grasp), window)
+        hit = self._slopes.get(key)
+        if hit is None or hit[0] is not grasp:
+            hit = self._slopes[key] = (grasp, grasp.slope(window * _SLOPE_WINDOW))
+        return hit[1]
 
     @staticmethod
     def _feedforward(model, target, rho, pressure):
@@ -664,13 +739,13 @@ class GripperControlLaw:
             what = (f'aperture {aperture * 1e3:.2f} mm, goal {self._aperture_target * 1e3:.2f} '
                     f'mm{self._out_of_range}')
         else:
-            tolerance = max(cfg.force_tolerance * self._force_target, cfg.force_tolerance_n)
+            share = self._force_target / len(outputs)
+            tolerance = max(cfg.force_tolerance * share, cfg.force_tolerance_n)
             contact = [o.phase is FingerPhase.CONTACT for o in outputs]
             forces = [o.contact_force for o in outputs]
-            inside = all(contact) and all(abs(f - self._force_target) <= tolerance
-                                          for f in forces)
-            what = (f'grasp {self._force_target:.3f} N: contact forces '
-                    f'{", ".join(f"{f:.3f}" for f in forces)} N, '
+            inside = all(contact) and all(abs(f - share) <= tolerance for f in forces)
+            what = (f'grasp {self._force_target:.3f} N: normal force {sum(forces):.3f} N '
+                    f'({", ".join(f"{f:.3f}" for f in forces)} N), '
                     f'{sum(contact)}/{len(contact)} fingers in contact')
         if inside:
             if self._in_tolerance_since is None:

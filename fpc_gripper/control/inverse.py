@@ -143,7 +143,10 @@ def _snap(value, step):
 
 class InverseModel:
     """
-    Inverse of the finger model: pressure for a tip radius, a grasp force, estimates.
+    Inverse of the finger model: pressure for a tip radius under a tip load, estimates.
+
+    The grasp (a contact force on an object) has its own inverse,
+    `fpc_gripper.grasp.FingerGrasp`, on the contact model.
 
     The finger is the one of the finger pipeline (`finger_model(design, settings)`),
     the model `model_node` publishes with the same settings. At construction the
@@ -483,34 +486,3 @@ class InverseModel:
                              success=status is InverseStatus.SUCCESS,
                              status=status, message=message, nfev=self.nfev - start,
                              target=target, rho=float(achieved), tip_force=tip_force)
-
-    def pressure_for_grasp(self, object_diameter, force):
-        """
-        Gauge pressure that presses a fingertip on a cylinder with a given contact force.
-
-        The cylinder (diameter D, on the palm axis) holds the tip at rho = D/2 and
-        pushes on it with `force` along the finger's +Z (outwards); friction is
-        ignored, so f0 = 0. The finger, which closes as the pressure falls, presses
-        harder at lower pressure.
-
-        Parameters
-        ----------
-        object_diameter : float
-            D [m], > 0.
-        force : float
-            Contact force per fingertip [N], >= 0.
-
-        Returns
-        -------
-        InverseResult
-            BELOW_RANGE (x = 0) when even 0 Pa cannot press that hard on that
-            object; ABOVE_RANGE when the object is too wide to be reached at that force.
-
-        """
-        diameter = real_number('object_diameter', object_diameter, '[m]')
-        force = real_number('force', force, '[N]')
-        if diameter <= 0.0:
-            raise ValueError(f'`object_diameter` must be > 0 [m], got {diameter}')
-        if force < 0.0:
-            raise ValueError(f'`force` must be >= 0 [N], got {force}')
-        return self.pressure_for_rho(0.5 * diameter, (0.0, force))

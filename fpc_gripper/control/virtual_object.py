@@ -1,202 +1,138 @@
-"""A virtual cylinder on the palm axis that pushes on the fingertips it would be penetrated by."""
+"""A virtual object in the gripper: every finger's contact with it at a measured pressure."""
 
 from dataclasses import dataclass
-import enum
 import math
 
 import numpy as np
-from scipy.interpolate import PchipInterpolator
-from scipy.optimize import brentq
 
-__all__ = ['Contact', 'ContactMethod', 'VirtualCylinder']
+from fpc_gripper.grasp.finger import FingerGrasp
+from fpc_gripper.grasp.grasp import GraspSettings, simulate_grasp
+from fpc_gripper.model.contact import ContactSettings
+from fpc_gripper.model.pipeline import ModelSettings
+from fpc_gripper.model.validation import real_number
 
-#: Pressure spacing of the contact-force table [Pa].
-DEFAULT_TABLE_STEP = 10.0e3
-#: Largest contact force looked for [N]; beyond it the finger model leaves its valid range.
-DEFAULT_MAX_FORCE = 5.0
-
-
-class ContactMethod(str, enum.Enum):
-    """How the contact force is found."""
-
-    EXACT = 'exact'
-    PENALTY = 'penalty'
+__all__ = ['FingerContact', 'VirtualObject']
 
 
 @dataclass(frozen=True)
-class Contact:
+class FingerContact:
     """
-    Contact state of one fingertip.
+    Contact state of one finger with the object.
 
     Attributes
     ----------
     pressure : float
         Gauge pressure [Pa].
-    force : float
-        p0, the contact force on the tip along the finger's +Z [N] (>= 0).
+    normal_force : float
+        Sum of the normal forces of the object on the finger [N].
+    force : tuple of float
+        Resultant (F_X, F_Z) of the contact forces on the finger, finger frame [N]: what
+        ``finger_<i>/tip_force`` carries.
+    torque : float
+        Their moment about the fingertip (midplane), about +Y [N m]: with `force` at the
+        tip, a wrench equivalent to the contact loads.
     in_contact : bool
-    free_rho : float
-        Tip radius the unloaded finger would have [m].
-    rho : float
-        Tip radius with the contact force [m].
-    penetration : float
-        D/2 - free_rho [m]: how deep the free finger would reach into the object.
+    arc : tuple of float or None
+        (start, end) reference arc length of the touching points [m].
+    tip : tuple of float
+        Midplane tip (X, Z) of the finger in contact [m].
 
     """
 
     pressure: float
-    force: float
+    normal_force: float
+    force: tuple
+    torque: float
     in_contact: bool
-    free_rho: float
-    rho: float
-    penetration: float
+    arc: tuple
+    tip: tuple
 
     @property
     def tip_force(self):
-        """(f0, p0) [N] to publish: friction is ignored, so f0 = 0."""
-        return (0.0, self.force)
+        """(F_X, F_Z) [N] to publish."""
+        return self.force
 
 
-class VirtualCylinder:
+class VirtualObject:
     """
-    A rigid (or compliant) cylinder of diameter D on the palm axis.
+    A rigid object held in the palm, felt by every finger through the contact model.
 
-    A fingertip whose unloaded radius rho_free(P) would be below D/2 touches it
-    and receives a force p0 > 0 along its +Z (radially outwards, the contact
-    normal of a cylinder on the axis). Friction is ignored (f0 = 0), and only the
-    tip touches: for the paper's finger, which curls less than a half turn, the
-    tip is the innermost point of the midplane.
-
-    ``method='exact'`` finds the p0 for which the loaded model puts the tip exactly
-    on the surface, rho(P, p0) = D/2 (a rigid object). ``method='penalty'`` models
-    a compliant surface of stiffness k: p0 = k (D/2 - rho(P, p0)), and the
-    equilibrium (not an explicit penalty step, which would oscillate) is found.
-    Both are roots in p0 of the increasing function
-    h(p0) = rho(P, p0) - D/2 + p0 / k (1/k = 0 for exact).
+    Finger i touches the object's section in its own plane (`obj.section`), solved by
+    `FingerGrasp` (frictionless contact on the finger pipeline's contact model): the
+    same model the controller's inverse uses. Friction enters only the holding force,
+    which needs a loading path (`holding_force`).
 
     Parameters
     ----------
-    diameter : float
-        D [m], > 0.
-    model : InverseModel
-        Finger model (gives rho and the exact solves).
-    method : {'exact', 'penalty'}
-    stiffness : float
-        k [N/m] for the penalty method.
-    table_step : float
-        The force is tabulated against pressure at this spacing [Pa] from 0 to the
-        pressure at which the free tip just touches, and interpolated (PCHIP);
-        `exact_force` skips the table.
-    max_force : float
-        Largest force looked for [N]; the force saturates there.
+    obj : CoaxialCylinder, Sphere, CrossCylinder or Box
+    config : GripperConfig
+    settings : ModelSettings
+    penalty : float
+        0: a rigid object; > 0: a compliant surface of that stiffness [N/m].
 
     """
 
-    def __init__(self, diameter, model, method='exact', stiffness=200.0,
-                 table_step=DEFAULT_TABLE_STEP, max_force=DEFAULT_MAX_FORCE):
-        self.diameter = float(diameter)
-        if not (math.isfinite(self.diameter) and self.diameter > 0.0):
-            raise ValueError(f'`diameter` must be finite and > 0 [m], got {diameter!r}')
-        self.method = ContactMethod(method)
-        self.stiffness = float(stiffness)
-        if self.method is ContactMethod.PENALTY and not (
-                math.isfinite(self.stiffness) and self.stiffness > 0.0):
-            raise ValueError(f'`stiffness` must be finite and > 0 [N/m], got {stiffness!r}')
-        self.table_step = float(table_step)
-        if not (math.isfinite(self.table_step) and self.table_step > 0.0):
-            raise ValueError(f'`table_step` must be finite and > 0 [Pa], got {table_step!r}')
-        self.max_force = float(max_force)
-        if not (math.isfinite(self.max_force) and self.max_force > 0.0):
-            raise ValueError(f'`max_force` must be finite and > 0 [N], got {max_force!r}')
-        self.model = model
-        self._compliance = 0.0 if self.method is ContactMethod.EXACT else 1.0 / self.stiffness
-        self._table = None
-        self.touch_pressure = self._touch_pressure()
+    def __init__(self, obj, config, settings=ModelSettings(), penalty=0.0):
+        penalty = real_number('penalty', penalty, '[N/m]')
+        if penalty < 0.0:
+            raise ValueError(f'`penalty` must be >= 0 [N/m], got {penalty}')
+        self.obj = obj
+        self.config = config
+        self.settings = settings
+        contact = ContactSettings(penalty=penalty)
+        self.fingers = tuple(
+            FingerGrasp(f.design, obj.section(f.mount_angle, config.palm_radius),
+                        config.max_pressure, settings, contact) for f in config.fingers)
 
     @property
-    def radius(self):
-        """D/2 [m]."""
-        return 0.5 * self.diameter
+    def touch_pressure(self):
+        """Largest pressure at which any free finger touches the object [Pa]."""
+        return max(f.touch_pressure for f in self.fingers)
 
-    def _touch_pressure(self):
-        """Largest pressure at which the free tip reaches the surface [Pa] (0: never)."""
-        low, high = self.model.rho_range
-        if self.radius <= low:
-            return 0.0
-        if self.radius >= high:
-            return self.model.max_pressure
-        return self.model.pressure_for_rho(self.radius).x
-
-    def _h(self, pressure, force):
-        return self.model.rho(pressure, (0.0, force)) - self.radius + self._compliance * force
-
-    def exact_force(self, pressure):
+    def contact(self, index, pressure):
         """
-        Contact force [N] at a gauge pressure [Pa] by a root find on the exact model.
+        Contact of finger `index` at a gauge pressure [Pa].
+
+        Returns
+        -------
+        FingerContact
 
         Raises
         ------
         RuntimeError
-            If the finger model does not converge.
+            If the contact model does not converge.
 
         """
-        pressure = float(pressure)
-        free = self.model.rho(pressure)
-        if free >= self.radius:
-            return 0.0
-        lin = self.model.linearise(pressure, (0.0, 0.0))
-        compliance = lin.drho_dp0 + self._compliance
-        high = min(self.max_force, 1.5 * (self.radius - free) / max(compliance, 1e-6) + 1e-3)
-        while self._h(pressure, high) < 0.0:
-            if high >= self.max_force:
-                return self.max_force
-            high = min(self.max_force, 2.0 * high)
-        return float(brentq(lambda f: self._h(pressure, f), 0.0, high, xtol=1e-9))
+        pressure = real_number('pressure', pressure, '[Pa]')
+        state = self.fingers[index].state(max(pressure, 0.0))
+        on_finger = -state.total_force.sum(axis=0)
+        mine = state.in_contact
+        arm = state.position[mine] - state.tip
+        forces = state.force[mine]
+        torque = float(np.sum(arm[:, 1] * forces[:, 0] - arm[:, 0] * forces[:, 1]))
+        return FingerContact(pressure=pressure, normal_force=state.normal_force_total,
+                             force=(float(on_finger[0]), float(on_finger[1])), torque=torque,
+                             in_contact=bool(mine.any()), arc=state.contact_arc(),
+                             tip=(float(state.tip[0]), float(state.tip[1])))
 
-    def _build_table(self):
-        top = self.touch_pressure
-        if top <= 0.0:
-            self._table = None
-            return
-        n = max(3, int(math.ceil(top / self.table_step)) + 1)
-        pressures = np.linspace(0.0, top, n)
-        # The force falls to 0 exactly at the touch pressure, unless the object is so
-        # wide that the tip touches it even at max_pressure.
-        forces = [self.exact_force(p) for p in pressures[:-1]]
-        forces.append(0.0 if top < self.model.max_pressure else self.exact_force(top))
-        self._table = PchipInterpolator(pressures, np.array(forces))
-
-    def force(self, pressure):
+    def holding_force(self, pressure, mu, settings=None):
         """
-        Contact force [N] at a gauge pressure [Pa], from the table (built on first use).
+        Largest pull-out force along the palm axis of a grasp at `pressure` [Pa], with mu.
 
-        With the default step the table is within 1e-4 N of `exact_force` on the
-        paper's finger; pressures beyond its ends are clipped to them.
-        """
-        pressure = float(pressure)
-        if not math.isfinite(pressure):
-            raise ValueError(f'`pressure` must be finite [Pa], got {pressure}')
-        if pressure >= self.touch_pressure and self.touch_pressure < self.model.max_pressure:
-            return 0.0
-        if self._table is None:
-            self._build_table()
-            if self._table is None:
-                return 0.0
-        pressure = min(max(pressure, 0.0), self.touch_pressure)
-        return max(float(self._table(pressure)), 0.0)
-
-    def contact(self, pressure):
-        """
-        Contact state of a tip at a gauge pressure [Pa].
+        The grasp is that of `fpc_gripper.grasp.simulate_grasp`: opened, the object placed,
+        released to `pressure` with friction mu, then pulled.
 
         Returns
         -------
-        Contact
+        GraspPoint
 
         """
-        pressure = float(pressure)
-        force = self.force(pressure)
-        free = self.model.rho_map(pressure)
-        rho = free if force <= 0.0 else self.radius - self._compliance * force
-        return Contact(pressure=pressure, force=force, in_contact=force > 0.0, free_rho=free,
-                       rho=rho, penetration=self.radius - free)
+        settings = GraspSettings(model=self.settings) if settings is None else settings
+        pressure = min(max(real_number('pressure', pressure, '[Pa]'), 0.0),
+                       self.config.max_pressure)
+        return simulate_grasp(self.config, self.obj, [pressure], mu, settings).points[0]
+
+    def total_normal_force(self, pressures):
+        """Sum over the fingers of their normal forces [N] at their pressures [Pa]."""
+        return float(math.fsum(self.contact(i, p).normal_force
+                               for i, p in enumerate(pressures)))

@@ -4,7 +4,7 @@ import functools
 import math
 
 import numpy as np
-from scipy.linalg import eigh
+from scipy.linalg import eigh, lu_factor, lu_solve
 
 from . import arc_kernels, engine, rod_kernels
 from .analysis import CircleFitted
@@ -424,13 +424,14 @@ class _RodHessian:
     `th` (E, Q) and the blocks `haa`, `hab`, `hbb` (E, Q, 2, 2) are read only. The
     condensation (`rod_kernels.condense_kernel`): `local` (every hbb positive definite),
     `inv` = hbb^-1, `hab_inv` = hab hbb^-1, the band `lower` of the condensed theta system
-    and its Cholesky `factor` (`_INDEFINITE` where it is not positive definite); None
+    and its Cholesky `factor` (`_INDEFINITE` where it is not positive definite, then
+    `dense_lu` keeps the LU of the dense condensed system once a solve needs it); None
     where not computed. `derivatives` also keeps the Newton step of its own gradient,
     which the first `step` with that gradient hands out.
     """
 
     __slots__ = ('th', 'haa', 'hab', 'hbb', 'local', 'inv', 'hab_inv', 'lower', 'factor',
-                 '_gradient', '_step')
+                 '_gradient', '_step', 'dense_lu')
 
     def __init__(self, th, haa, hab, hbb, local=None, inv=None, hab_inv=None, lower=None,
                  factor=None, gradient=None, step=None):
@@ -438,6 +439,7 @@ class _RodHessian:
         self.local, self.inv, self.hab_inv = local, inv, hab_inv
         self.lower, self.factor = lower, factor
         self._gradient, self._step = gradient, step
+        self.dense_lu = None
 
 
 def _dense_band(lower):
@@ -672,7 +674,13 @@ class RodSolver(_LadderSolver):
         reduced = rod_kernels.reduced_rhs_kernel(rhs, hess.hab_inv, self._basis,
                                                  self._dbasis, self._theta_scale)
         if not mirror:
-            dtheta = np.linalg.solve(kred, reduced)
+            # One LU per Hessian: the bordered solves of contact reuse it for many columns.
+            if hess.dense_lu is None:
+                hess.dense_lu = lu_factor(kred, check_finite=False)
+                if not np.all(np.isfinite(hess.dense_lu[0])) or np.any(
+                        np.diag(hess.dense_lu[0]) == 0.0):
+                    raise np.linalg.LinAlgError('the condensed rod system is singular')
+            dtheta = lu_solve(hess.dense_lu, reduced, check_finite=False)
         else:
             lam, vec = eigh(kred, check_finite=False)
             lam = np.maximum(np.abs(lam), 1e-10 * np.abs(lam).max())
@@ -734,6 +742,125 @@ class RodSolver(_LadderSolver):
                              f'got node {node}')
         return rod_kernels.node_jacobian_kernel(np.ascontiguousarray(x, dtype=float),
                                                 self._basis, self._weights)
+
+    # -- face points at element ends (contact: docs/physics.md, section 15.2) -----------
+    # The rod's eps lives at its Gauss points, so a point's position is exact (the tip's
+    # quadrature) only at an element end: its contact points are the element ends. These
+    # hooks are numpy around the compiled kernels: the rod is the accuracy reference, not
+    # the production model.
+    def _ends(self, pseg, poff):
+        """Element-end node index of every face point; ValueError for any other point."""
+        pseg = np.asarray(pseg, dtype=np.int64).reshape(-1)
+        poff = np.asarray(poff, dtype=float).reshape(-1)
+        if pseg.size and (pseg.min() < 0 or pseg.max() >= self.n_elements):
+            raise ValueError(f'face point elements must lie in [0, {self.n_elements}), got '
+                             f'{pseg.tolist()}')
+        lengths = np.diff(self.edges)[pseg]
+        if np.any(np.abs(poff - lengths) > 1e-12 * self.length):
+            raise ValueError('RodSolver has face points at element ends only: every offset '
+                             'must equal its element length [m]')
+        return (pseg + 1) * self.degree
+
+    def _fields(self, x):
+        """Nodal theta (n_theta,), theta (E, Q) and stretch 1 + eps (E, Q) at the points."""
+        theta = np.concatenate([[0.0], x[:self.n_theta - 1]])
+        at_points = theta[self._dofs] @ self._basis.T
+        stretch = 1.0 + x[self.n_theta - 1:].reshape(self._qtypes.shape + (2,))[..., 0]
+        return theta, at_points, stretch
+
+    def point_positions(self, x, pseg, poff, pz):
+        """Positions (K, 2) [m] of face points at element ends."""
+        x = np.asarray(x, dtype=float)
+        node = self._ends(pseg, poff)
+        theta, th, stretch = self._fields(x)
+        chords = np.stack([(self._weights * stretch * np.cos(th)).sum(axis=1),
+                           (self._weights * stretch * np.sin(th)).sum(axis=1)], axis=1)
+        ends = np.concatenate([np.zeros((1, 2)), np.cumsum(chords, axis=0)])
+        end_theta = theta[node]
+        z = np.asarray(pz, dtype=float).reshape(-1)
+        return ends[node // self.degree] + z[:, None] * np.stack(
+            [-np.sin(end_theta), np.cos(end_theta)], axis=1)
+
+    def point_jacobian(self, x, seg, offset, z):
+        """Position of a face point at an element end [m] and its derivatives, (2, n)."""
+        x = np.asarray(x, dtype=float)
+        node = int(self._ends([seg], [offset])[0])
+        theta, th, stretch = self._fields(x)
+        inside = slice(0, int(seg) + 1)
+        wt = self._weights[inside]
+        jac = np.zeros((2, x.size))
+        cs, sn = np.cos(th[inside]), np.sin(th[inside])
+        position = np.array([(wt * stretch[inside] * cs).sum(),
+                             (wt * stretch[inside] * sn).sum()])
+        # theta dofs through the basis; eps at the points directly.
+        dofs = self._dofs[inside] - 1
+        for row, values in ((0, -wt * stretch[inside] * sn), (1, wt * stretch[inside] * cs)):
+            contrib = np.einsum('eq,qa->ea', values, self._basis)
+            keep = dofs >= 0
+            np.add.at(jac[row], dofs[keep], contrib[keep])
+        eps_index = self.n_theta - 1 + 2 * np.arange(wt.size)
+        jac[0, eps_index] = (wt * cs).ravel()
+        jac[1, eps_index] = (wt * sn).ravel()
+        end = theta[node]
+        position += z * np.array([-math.sin(end), math.cos(end)])
+        jac[0, node - 1] += -z * math.cos(end)
+        jac[1, node - 1] += -z * math.sin(end)
+        return position, jac
+
+    def point_derivatives(self, x, pressure, loads, pseg, poff, pz, pforce):
+        """
+        Return `derivatives` with dead forces at face points (element ends) and tip loads.
+
+        A force at the end of element e is carried by the elements 0..e: the kernel's
+        pointwise load terms with a carried force per element; its offset z n(theta_end)
+        adds a term in that end's nodal theta, which enters the condensed band's diagonal.
+        """
+        x = np.ascontiguousarray(x, dtype=float)
+        pforce = np.asarray(pforce, dtype=float).reshape(-1, 2)
+        node = self._ends(pseg, poff)
+        z = np.asarray(pz, dtype=float).reshape(-1)
+        carried = np.tile(self._force(loads), (self.n_elements, 1))
+        element = node // self.degree - 1
+        for e, force in zip(element, pforce):
+            carried[:e + 1] += force
+        (energy, grad, th, haa, hab, hbb, *_) = rod_kernels.derivatives_kernel(
+            x, self._basis, self._dbasis, self._weights, self._stiffness, self._gas,
+            self._pemc, self.pressure_coefficient * pressure, np.zeros(2), self._theta_scale)
+        _, _, stretch = self._fields(x)
+        cs, sn = np.cos(th), np.sin(th)
+        along = carried[:, :1] * cs + carried[:, 1:] * sn
+        normal = -carried[:, :1] * sn + carried[:, 1:] * cs
+        energy -= float((self._weights * stretch * along).sum())
+        values = self._weights * -stretch * normal
+        contrib = np.einsum('eq,qa->ea', values, self._basis)
+        dofs = self._dofs - 1
+        keep = dofs >= 0
+        np.add.at(grad, dofs[keep], contrib[keep])
+        eps_index = self.n_theta - 1 + 2 * np.arange(self._weights.size)
+        grad[eps_index] -= (self._weights * along).ravel()
+        haa[..., 0, 0] += stretch * along
+        hab[..., 0, 0] -= normal
+        diagonal = np.zeros(self.n_theta - 1)
+        theta = np.concatenate([[0.0], x[:self.n_theta - 1]])
+        for k, force in enumerate(pforce):
+            end = theta[node[k]]
+            t = force[0] * math.cos(end) + force[1] * math.sin(end)
+            n = -force[0] * math.sin(end) + force[1] * math.cos(end)
+            energy -= z[k] * n
+            grad[node[k] - 1] += z[k] * t
+            diagonal[node[k] - 1] += z[k] * n
+        local, inv, hab_inv, lower = rod_kernels.condense_kernel(
+            haa, hab, hbb, self._weights, self._basis, self._dbasis, self._theta_scale)
+        lower[0] += diagonal / self._theta_scale
+        factor, definite = rod_kernels.banded_cholesky(lower)
+        if local and definite:
+            step = rod_kernels.condensed_solve_kernel(
+                factor, -grad, inv, hab, hab_inv, self._weights, self._basis, self._dbasis,
+                self._theta_scale)
+            return energy, grad, _RodHessian(th, haa, hab, hbb, local, inv, hab_inv, lower,
+                                             factor, grad, step)
+        return energy, grad, _RodHessian(th, haa, hab, hbb, local, inv, hab_inv, lower,
+                                         _INDEFINITE)
 
     # -- outputs ------------------------------------------------------------
     def _points(self, x, geometry, pressure, force):

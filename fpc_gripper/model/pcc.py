@@ -78,6 +78,12 @@ def pcc_edges(design, n_segments):
     return edges, np.repeat(types, counts), law
 
 
+def _point_arrays(pseg, poff, pz):
+    """Face points as the kernels take them: (segment int64, offset, height) arrays."""
+    return (np.ascontiguousarray(pseg, dtype=np.int64), np.ascontiguousarray(poff, dtype=float),
+            np.ascontiguousarray(pz, dtype=float))
+
+
 class PCCResult(LadderResult):
     """
     Result of `PCCSolver`.
@@ -330,6 +336,36 @@ class PCCSolver(_LadderSolver):
         out[:, :, 2] = rates[:, :, 1].T
         out[:, :-1, 2] -= rates[1:, :, 1].T
         return out.reshape(rates.shape[1], -1)
+
+    # -- face points (contact: docs/physics.md, section 15.2) -------------------
+    def point_derivatives(self, x, pressure, loads, pseg, poff, pz, pforce):
+        """
+        Return `derivatives` with dead forces at face points as well as node loads.
+
+        Parameters
+        ----------
+        pseg, poff, pz : ndarray, shape (K,)
+            Segment, reference arc length into it [m] and height from the midplane [m]
+            of every point.
+        pforce : ndarray, shape (K, 2)
+            (F_X, F_Z) at every point [N].
+
+        """
+        energy, grad, *hook = kernels.point_derivatives_kernel(
+            np.ascontiguousarray(x, dtype=float), self.lengths, self._stiffness, self._gas,
+            self._pemc, self.pressure_coefficient * float(pressure), *self._load_arrays(loads),
+            *_point_arrays(pseg, poff, pz), np.ascontiguousarray(pforce, dtype=float))
+        return energy, grad, _Banded(tuple(hook))
+
+    def point_positions(self, x, pseg, poff, pz):
+        """Positions (K, 2) [m] of face points at engine unknowns `x`."""
+        return kernels.point_positions_kernel(np.ascontiguousarray(x, dtype=float),
+                                              self.lengths, *_point_arrays(pseg, poff, pz))
+
+    def point_jacobian(self, x, seg, offset, z):
+        """Position of a face point [m] and its derivatives in the engine unknowns, (2, 3 N)."""
+        return kernels.point_jacobian_kernel(np.ascontiguousarray(x, dtype=float),
+                                             self.lengths, int(seg), float(offset), float(z))
 
     def nodes(self, x):
         """Segment ends O_0 = 0 .. O_N = tip [m], (N + 1, 2), at engine unknowns `x`."""

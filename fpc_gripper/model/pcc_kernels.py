@@ -10,7 +10,8 @@ __all__ = ['section_arrays', 'half_angle_sinc_kernel', 'energy_kernel', 'derivat
            'banded_cholesky', 'cholesky_solve', 'newton_step_kernel', 'nodes_kernel',
            'node_jacobian_kernel', 'outputs_kernel', 'BANDWIDTH', 'PCCData', 'shifted_step',
            'pcc_derivatives', 'pcc_energy', 'pcc_step', 'pcc_solve_linear',
-           'pcc_node_jacobian']
+           'pcc_node_jacobian', 'point_positions_kernel', 'point_jacobian_kernel',
+           'point_derivatives_kernel']
 
 # Compiled once per argument types and kept on disk; nogil lets a caller thread the solves.
 _jit = numba.njit(cache=True, nogil=True)
@@ -256,6 +257,35 @@ def derivatives_kernel(x, lengths, stiffness, gas, pemc, work, load_nodes, load_
     """
     Energy, gradient and lower band of the exact Hessian of the PCC potential.
 
+    The assembly (`_assemble`) and, since the engine's next call is the Newton step with
+    this Hessian, the banded Cholesky factor and step, once for the step and the
+    bordered solves (`newton_step_kernel`).
+
+    Parameters are those of `energy_kernel`.
+
+    Returns
+    -------
+    energy, gradient, lower
+        See `_assemble`.
+    factor, step, definite
+        `newton_step_kernel` of (lower, gradient).
+
+    References
+    ----------
+    docs/physics.md, section 11.6.
+
+    """
+    energy, grad, lower = _assemble(x, lengths, stiffness, gas, pemc, work, load_nodes,
+                                    load_forces)
+    factor, step, definite = newton_step_kernel(lower, grad)
+    return energy, grad, lower, factor, step, definite
+
+
+@_jit
+def _assemble(x, lengths, stiffness, gas, pemc, work, load_nodes, load_forces):
+    """
+    Energy, gradient and lower band of the exact Hessian of the PCC potential.
+
     Every segment's term depends on its local unknowns (theta_{i-1}, eps_i, c1_i,
     theta_i), the engine unknowns 3i - 1 .. 3i + 2 (theta_0 = 0 is clamped): the
     element gradient is L T^T g and Hessian L T^T h T of the section law's (g, h) in
@@ -272,12 +302,6 @@ def derivatives_kernel(x, lengths, stiffness, gas, pemc, work, load_nodes, load_
         [J].
     lower : ndarray, shape (4, 3 N)
         lower[d, k] = H[k + d, k] [J].
-    factor, step, definite
-        `newton_step_kernel` of (lower, gradient).
-
-    References
-    ----------
-    docs/physics.md, section 11.6.
 
     """
     n = lengths.size
@@ -344,10 +368,7 @@ def derivatives_kernel(x, lengths, stiffness, gas, pemc, work, load_nodes, load_
         lower[1, c] = h_cb
         lower[0, b] = h_bb
         prev = theta
-    # The engine's next call is the Newton step with this Hessian: factorise it here, once
-    # for the step and the bordered solves, and save the step a kernel call of its own.
-    factor, step, definite = newton_step_kernel(lower, grad)
-    return strain - load, grad, lower, factor, step, definite
+    return strain - load, grad, lower
 
 
 # -- banded Cholesky (LAPACK dpbtf2 / dpbtrs, lower; the rows give the half-bandwidth) --------
@@ -501,6 +522,198 @@ def node_jacobian_kernel(x, lengths, node):
             jac[1, 3 * i - 1] += stretch * (-dz_d + 0.5 * dz_m)
         prev = theta
     return position, jac
+
+
+# -- face points: a material point at reference arc length sigma into segment i, at height z
+# from the midplane along its normal (docs/physics.md, section 15.2) ----------------------------
+@_jit
+def _face_angles(a, b, length, offset):
+    """Return f = sigma / L, phi = f (b - a), S(phi), S', S'' and the angles a + phi/2, a + phi."""
+    f = offset / length
+    phi = f * (b - a)
+    s0, s1, s2 = _sinc(phi)
+    return f, phi, s0, s1, s2, a + 0.5 * phi, a + phi
+
+
+@_jit
+def _face_offset(a, eps, b, length, offset, z):
+    """
+    Offset q of a face point from its segment's start node, and dq/d(a, eps, b).
+
+    With f = sigma / L_i, phi = f (b - a) the turning up to the point, the partial chord
+    (1 + eps) sigma S(phi) (cos, sin)(a + phi / 2) and the normal n = (-sin, cos)(a + phi),
+    q = chord + z n.
+
+    Returns
+    -------
+    q : (float, float)
+        [m].
+    dq : ndarray, shape (2, 3)
+        Columns d/da, d/deps, d/db [m].
+
+    """
+    f, phi, s0, s1, s2, mid, end = _face_angles(a, b, length, offset)
+    cm, sm = math.cos(mid), math.sin(mid)
+    ce, se = math.cos(end), math.sin(end)
+    reach = (1.0 + eps) * offset
+    qx = reach * s0 * cm - z * se
+    qz = reach * s0 * sm + z * ce
+    dq = np.empty((2, 3))
+    # d/dphi of the chord along u(mid), d/dmid along n(mid); n(end)' = -u(end).
+    for r in range(2):
+        u = cm if r == 0 else sm
+        nn = -sm if r == 0 else cm
+        ue = ce if r == 0 else se
+        d_phi = reach * s1 * u
+        d_mid = reach * s0 * nn
+        dq[r, 0] = -f * d_phi + (1.0 - 0.5 * f) * d_mid - z * (1.0 - f) * ue
+        dq[r, 1] = offset * s0 * u
+        dq[r, 2] = f * d_phi + 0.5 * f * d_mid - z * f * ue
+    return qx, qz, dq
+
+
+@_jit
+def _face_load(a, eps, b, length, offset, z, fx, fz, grad_h):
+    """
+    Potential -F . q of a dead force at a face point, its gradient and Hessian in (a, eps, b).
+
+    grad_h (4, 3) receives the gradient (row 0) and the Hessian (rows 1..3) [J]; returns
+    the potential [J].
+    """
+    f, phi, s0, s1, s2, mid, end = _face_angles(a, b, length, offset)
+    cm, sm = math.cos(mid), math.sin(mid)
+    gu = fx * cm + fz * sm                     # F . u(mid)
+    gn = -fx * sm + fz * cm                    # F . n(mid) = d(F . u)/d mid
+    ce, se = math.cos(end), math.sin(end)
+    gu2 = fx * ce + fz * se
+    gn2 = -fx * se + fz * ce                   # F . n(end)
+    reach = (1.0 + eps) * offset
+    # F . q = reach h(phi, mid) + z k(end), h = S(phi) F . u(mid), k = F . n(end).
+    h = s0 * gu
+    h_p, h_m = s1 * gu, s0 * gn
+    h_pp, h_pm, h_mm = s2 * gu, s1 * gn, -s0 * gu
+    k_1, k_2 = -gu2, -gn2
+    # d(phi, mid, end)/d(a, b) = (-f, 1 - f/2, 1 - f) and (f, f/2, f).
+    jp = (-f, f)
+    jm = (1.0 - 0.5 * f, 0.5 * f)
+    je = (1.0 - f, f)
+    da = (reach * (h_p * jp[0] + h_m * jm[0]) + z * k_1 * je[0],
+          reach * (h_p * jp[1] + h_m * jm[1]) + z * k_1 * je[1])
+    de = (offset * (h_p * jp[0] + h_m * jm[0]), offset * (h_p * jp[1] + h_m * jm[1]))
+    # Columns of grad_h: (a, eps, b); the potential is -F . q.
+    grad_h[0, 0] = -da[0]
+    grad_h[0, 1] = -offset * h
+    grad_h[0, 2] = -da[1]
+    for r in range(2):
+        for c in range(2):
+            hess = reach * (jp[r] * jp[c] * h_pp + (jp[r] * jm[c] + jm[r] * jp[c]) * h_pm
+                            + jm[r] * jm[c] * h_mm) + z * k_2 * je[r] * je[c]
+            grad_h[1 + 2 * r, 2 * c] = -hess
+        grad_h[1 + 2 * r, 1] = -de[r]
+        grad_h[2, 2 * r] = -de[r]
+    grad_h[2, 1] = 0.0
+    return -(reach * h + z * (fx * (-se) + fz * ce))
+
+
+@_jit
+def point_positions_kernel(x, lengths, pseg, poff, pz):
+    """
+    Positions of face points [m], shape (K, 2).
+
+    Point k lies sigma_k = poff[k] into segment pseg[k], at height pz[k] along the normal.
+    """
+    nodes = nodes_kernel(x, lengths)
+    out = np.empty((pseg.size, 2))
+    for k in range(pseg.size):
+        i = pseg[k]
+        a = 0.0 if i == 0 else x[3 * i - 1]
+        qx, qz, _ = _face_offset(a, x[3 * i], x[3 * i + 2], lengths[i], poff[k], pz[k])
+        out[k, 0] = nodes[i, 0] + qx
+        out[k, 1] = nodes[i, 1] + qz
+    return out
+
+
+@_jit
+def point_jacobian_kernel(x, lengths, seg, offset, z):
+    """Position (2,) of a face point [m] and its derivatives (2, 3 N) in the engine unknowns."""
+    position, jac = node_jacobian_kernel(x, lengths, seg)
+    a = 0.0 if seg == 0 else x[3 * seg - 1]
+    qx, qz, dq = _face_offset(a, x[3 * seg], x[3 * seg + 2], lengths[seg], offset, z)
+    position[0] += qx
+    position[1] += qz
+    for r in range(2):
+        if seg > 0:
+            jac[r, 3 * seg - 1] += dq[r, 0]
+        jac[r, 3 * seg] += dq[r, 1]
+        jac[r, 3 * seg + 2] += dq[r, 2]
+    return position, jac
+
+
+@_jit
+def point_derivatives_kernel(x, lengths, stiffness, gas, pemc, work, load_nodes, load_forces,
+                             pseg, poff, pz, pforce):
+    """
+    `derivatives_kernel` with dead forces at face points as well as at nodes.
+
+    A force F at point k of segment i has the potential -F . (O_i + q_k): a node load at
+    node i (the segment's start), which the carried loads take, and -F . q_k, a function
+    of segment i's (theta_{i-1}, eps_i, theta_i) alone, so the Hessian stays banded.
+
+    Parameters
+    ----------
+    x, lengths, stiffness, gas, pemc, work, load_nodes, load_forces
+        As `energy_kernel`.
+    pseg, poff, pz : ndarray, shape (K,)
+        Segment, arc length into it [m] and height [m] of every point.
+    pforce : ndarray, shape (K, 2)
+        (F_X, F_Z) at every point [N]; points with no force cost nothing.
+
+    Returns
+    -------
+    The tuple of `derivatives_kernel`.
+
+    References
+    ----------
+    docs/physics.md, section 15.2.
+
+    """
+    count = 0
+    for k in range(pseg.size):
+        if pforce[k, 0] != 0.0 or pforce[k, 1] != 0.0:
+            count += 1
+    nodes = np.empty(load_nodes.size + count, dtype=np.int64)
+    forces = np.empty((load_nodes.size + count, 2))
+    nodes[:load_nodes.size] = load_nodes
+    forces[:load_nodes.size] = load_forces
+    j = load_nodes.size
+    for k in range(pseg.size):
+        if pforce[k, 0] != 0.0 or pforce[k, 1] != 0.0:
+            nodes[j] = pseg[k]
+            forces[j, 0], forces[j, 1] = pforce[k, 0], pforce[k, 1]
+            j += 1
+    energy, grad, lower = _assemble(x, lengths, stiffness, gas, pemc, work, nodes, forces)
+    local = np.empty((4, 3))
+    for k in range(pseg.size):
+        if pforce[k, 0] == 0.0 and pforce[k, 1] == 0.0:
+            continue
+        i = pseg[k]
+        a = 0.0 if i == 0 else x[3 * i - 1]
+        energy += _face_load(a, x[3 * i], x[3 * i + 2], lengths[i], poff[k], pz[k],
+                             pforce[k, 0], pforce[k, 1], local)
+        # Local (a, e, b) = engine unknowns 3i - 1, 3i, 3i + 2 (a clamped for i = 0).
+        e, b = 3 * i, 3 * i + 2
+        grad[e] += local[0, 1]
+        grad[b] += local[0, 2]
+        lower[0, e] += local[2, 1]
+        lower[2, e] += local[3, 1]
+        lower[0, b] += local[3, 2]
+        if i > 0:
+            grad[e - 1] += local[0, 0]
+            lower[0, e - 1] += local[1, 0]
+            lower[1, e - 1] += local[2, 0]
+            lower[3, e - 1] += local[3, 0]
+    factor, step, definite = newton_step_kernel(lower, grad)
+    return energy, grad, lower, factor, step, definite
 
 
 @_jit
@@ -693,5 +906,29 @@ def pcc_node_jacobian(p, x, node):
     return node_jacobian_kernel(x, p.lengths, node)
 
 
+@_jit
+def pcc_point_derivatives(p, x, pressure, nodes, forces, pseg, poff, pz, pforce):
+    """Energy, gradient and banded Hessian with node and face-point loads."""
+    energy, grad, lower, factor, step, definite = point_derivatives_kernel(
+        x, p.lengths, p.stiffness, p.gas, p.pemc, p.pressure_coefficient * pressure, nodes,
+        forces, pseg, poff, pz, pforce)
+    return energy, grad, (lower, factor, step, definite)
+
+
+@_jit
+def pcc_point_positions(p, x, pseg, poff, pz):
+    """Positions (K, 2) of face points [m]."""
+    return point_positions_kernel(x, p.lengths, pseg, poff, pz)
+
+
+@_jit
+def pcc_point_jacobian(p, x, seg, offset, z):
+    """Position (2,) of a face point [m] and its derivatives (2, 3N)."""
+    return point_jacobian_kernel(x, p.lengths, seg, offset, z)
+
+
 PCCData._kernels = {'derivatives': pcc_derivatives, 'energy': pcc_energy, 'step': pcc_step,
-                    'solve_linear': pcc_solve_linear, 'node_jacobian': pcc_node_jacobian}
+                    'solve_linear': pcc_solve_linear, 'node_jacobian': pcc_node_jacobian,
+                    'point_derivatives': pcc_point_derivatives,
+                    'point_positions': pcc_point_positions,
+                    'point_jacobian': pcc_point_jacobian}

@@ -7,11 +7,13 @@ import math
 import numpy as np
 
 from .design import ActuatorDesign
+from .pcc import PCCSolver
 from .selection import AdaptiveSolver
 from .solver import CCMSolver, check_pressure_model
 
 __all__ = ['DEFAULT_TOLERANCE', 'DEFAULT_N_SEGMENTS', 'MAX_SEGMENTS', 'ModelSettings',
-           'finger_model', 'model_label', 'rung_label', 'solver_label']
+           'finger_model', 'contact_model', 'contact_segments', 'model_label', 'rung_label',
+           'solver_label']
 
 #: Default tip-position tolerance against the geometrically exact rod [m].
 DEFAULT_TOLERANCE = 5e-5
@@ -91,6 +93,56 @@ def finger_model(design, settings=ModelSettings()):
         return AdaptiveSolver(design, tolerance=settings.tolerance,
                               pressure_model=settings.pressure_model)
     return CCMSolver(design, n_segments=settings.n_segments,
+                     pressure_model=settings.pressure_model)
+
+
+#: PCC segment counts for contact, with their worst tip error against the rod over the loaded
+#: ladder scenes (docs/physics.md, section 11.6) [m].
+_CONTACT_LADDER = ((32, 17.8e-6), (64, 4.07e-6), (128, 0.944e-6))
+#: Safety factor on those errors, as the error model's.
+_CONTACT_SAFETY = 1.5
+
+
+def contact_segments(tolerance):
+    """
+    PCC segments of the contact model for a tip tolerance [m] (0: the paper CCM setting).
+
+    The fewest of 32, 64, 128 whose worst loaded tip error, times 1.5, meets the tolerance;
+    32 for tolerance 0 (the paper CCM has no face kinematics, so contact always runs on
+    the PCC) and 128 below what 128 meets.
+    """
+    for n, error in _CONTACT_LADDER:
+        if tolerance == 0.0 or error * _CONTACT_SAFETY <= tolerance:
+            return n
+    return _CONTACT_LADDER[-1][0]
+
+
+@functools.lru_cache(maxsize=32)
+def contact_model(design, settings=ModelSettings()):
+    """
+    Return the finger solver for contact scenes: the PCC rod, with face points.
+
+    A grasp loads the finger along its faces, not at the tip, and a friction path must
+    keep one discretisation from step to step, so contact scenes do not go through the
+    per-scene model choice: they use the PCC with `contact_segments(settings.tolerance)`
+    segments (32 for the default 0.05 mm: its worst loaded tip error is 18 um). The
+    controller's inverse, the demo's virtual object and `fpc-grasp` all call this.
+
+    Parameters
+    ----------
+    design : ActuatorDesign
+    settings : ModelSettings
+
+    Returns
+    -------
+    PCCSolver
+
+    """
+    if not isinstance(design, ActuatorDesign):
+        raise TypeError(f'`design` must be an ActuatorDesign, got {type(design).__name__}')
+    if not isinstance(settings, ModelSettings):
+        raise TypeError(f'`settings` must be a ModelSettings, got {type(settings).__name__}')
+    return PCCSolver(design, n_segments=contact_segments(settings.tolerance),
                      pressure_model=settings.pressure_model)
 
 

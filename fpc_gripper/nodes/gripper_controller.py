@@ -2,10 +2,13 @@
 Node that closes the loop: aperture and grasp-force goals to finger pressure commands.
 
 Inputs (relative to the namespace): ``aperture_command`` (std_msgs/Float64, [m]),
-``grasp_force_command`` (std_msgs/Float64, contact force per fingertip [N]), per finger
-``finger_<i>/pressure`` (sensor_msgs/FluidPressure, measured, absolute [Pa], sensor-data
-QoS) and ``finger_<i>/tip_force`` (geometry_msgs/WrenchStamped, frame ``finger_<i>``,
-force.x = f0, force.z = p0 [N]). Outputs: ``finger_<i>/pressure_command``
+``grasp_force_command`` (std_msgs/Float64, the total normal force of the fingers on the
+object [N]), per finger ``finger_<i>/pressure`` (sensor_msgs/FluidPressure, measured,
+absolute [Pa], sensor-data QoS) and ``finger_<i>/tip_force`` (geometry_msgs/WrenchStamped,
+frame ``finger_<i>``: the contact force on the finger, force.x and force.z the resultant
+(F_X, F_Z) [N]; torque is not used). The object to grasp is a parameter (``object``,
+``object_diameter``, ``object_height``; ``unknown``: a cylinder on the palm axis through
+the point where contact is felt). Outputs: ``finger_<i>/pressure_command``
 (FluidPressure, ABSOLUTE [Pa] = gauge + atmospheric_pressure), ``aperture``
 (std_msgs/Float64, the model estimate [m]), ``controller_state`` and ``/diagnostics``.
 
@@ -13,8 +16,9 @@ force.x = f0, force.z = p0 [N]). Outputs: ``finger_<i>/pressure_command``
 step: a standard, typed message (level OK/WARN/ERROR, a message, key/value pairs) that
 every ROS 2 distribution ships, that records to MCAP and decodes without a custom
 schema, and whose level means the same as on ``/diagnostics``. Keys: mode, goal_status,
-aperture_m, aperture_target_m, force_target_n and per finger
-``finger_<i>/{command_pa,feedforward_pa,rho_m,phase,contact_force_n,saturated}``
+aperture_m, aperture_target_m, force_target_n, normal_force_n (the estimated total) and per
+finger ``finger_<i>/{command_pa,feedforward_pa,rho_m,phase,contact_force_n,saturated}``
+(contact_force_n: the finger's estimated normal force)
 (pressures gauge). ``/diagnostics`` carries the same status at 1 Hz and at every change
 of mode, goal status or level (goal reached, stalled, feedback lost).
 
@@ -46,6 +50,9 @@ from fpc_gripper.control.controller import GripperControlLaw
 from fpc_gripper.control.controller import SAFE_STATES
 from fpc_gripper.control.geometry import PalmGeometry
 from fpc_gripper.control.inverse import InverseModel
+from fpc_gripper.grasp.finger import FingerGrasp
+from fpc_gripper.grasp.objects import make_object
+from fpc_gripper.grasp.objects import OBJECTS
 from fpc_gripper.io.config import default_gripper_config_path
 from fpc_gripper.io.config import load_gripper_config
 from fpc_gripper.model import PRESSURE_MODEL_NAMES
@@ -122,8 +129,15 @@ def _parameter_table(config_max_pressure):
          "On lost feedback: 'vent' commands 0 Pa gauge, 'hold' keeps the last command.",
          {'additional_constraints': f'one of {list(SAFE_STATES)}'}),
         ('contact_threshold_n', defaults.contact_threshold_n,
-         'Tip force along +Z above which a finger is in contact [N].',
+         'Normal contact force above which a finger is in contact [N].',
          {'floating_point_range': float_range(1.0e-4, 10.0)}),
+        ('object', 'unknown',
+         f'Object to grasp: unknown, or one of {list(OBJECTS)} (resting on the palm).',
+         {'read_only': True, 'additional_constraints': f"one of {['unknown', *OBJECTS]}"}),
+        ('object_diameter', 0.040, 'Size D of the object to grasp [m].',
+         {'read_only': True, 'floating_point_range': float_range(1.0e-3, 0.5)}),
+        ('object_height', 0.0, "Height of the object's lowest point above the palm [m].",
+         {'read_only': True, 'floating_point_range': float_range(0.0, 0.5)}),
         ('atmospheric_pressure', 101325.0,
          'Atmospheric pressure [Pa]: absolute = gauge + atmospheric_pressure.',
          {'floating_point_range': float_range(3.0e4, 1.2e5)}),
@@ -173,7 +187,8 @@ class GripperController(Node):
                 models[finger.design] = InverseModel(
                     finger.design, config.palm_radius, config.max_pressure, settings)
         self._law = GripperControlLaw([models[f.design] for f in config.fingers],
-                                      PalmGeometry.from_config(config), self._law_config())
+                                      PalmGeometry.from_config(config), self._law_config(),
+                                      self._grasps(config, settings))
         n = len(self._names)
         self._pressure = [None] * n
         self._stamp = [None] * n
@@ -205,6 +220,19 @@ class GripperController(Node):
             f'ready: {n} fingers, palm radius {config.palm_radius * 1e3:.1f} mm, aperture '
             f'{low * 1e3:.1f}..{high * 1e3:.1f} mm, max_pressure '
             f'{self._law.max_pressure:.0f} Pa gauge, {self._rate():g} Hz')
+
+    def _grasps(self, config, settings):
+        """Every finger's FingerGrasp of the declared object (None for 'unknown')."""
+        kind = self.get_parameter('object').value
+        if kind == 'unknown':
+            return None
+        if kind not in OBJECTS:
+            raise ValueError(f"`object` must be 'unknown' or one of {list(OBJECTS)}, got "
+                             f'{kind!r}')
+        obj = make_object(kind, self.get_parameter('object_diameter').value,
+                          self.get_parameter('object_height').value)
+        return [FingerGrasp(f.design, obj.section(f.mount_angle, config.palm_radius),
+                            config.max_pressure, settings) for f in config.fingers]
 
     # -- public helpers ---------------------------------------------------------------------
 
@@ -314,7 +342,7 @@ class GripperController(Node):
         except (TypeError, ValueError) as exc:
             self.get_logger().warning(f'grasp_force_command rejected: {exc}')
             return
-        self.get_logger().info(f'grasp goal {msg.data:.3f} N per fingertip')
+        self.get_logger().info(f'grasp goal {msg.data:.3f} N total normal force')
 
     # -- the loop ---------------------------------------------------------------------------
 
@@ -349,6 +377,7 @@ class GripperController(Node):
             'aperture_m': f'{out.aperture:.6f}',
             'aperture_target_m': f'{out.aperture_target:.6f}',
             'force_target_n': f'{out.force_target:.4f}',
+            'normal_force_n': f'{out.normal_force:.4f}',
         }
         for name, finger in zip(self._names, out.fingers):
             values[f'{name}/command_pa'] = f'{finger.command:.1f}'

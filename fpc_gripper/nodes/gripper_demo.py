@@ -1,4 +1,4 @@
-"""Scripted gripper session in one process: open, grasp a virtual cylinder, hold, release."""
+"""Scripted gripper session in one process: open, grasp a virtual object, hold, release."""
 
 import argparse
 import collections
@@ -28,9 +28,9 @@ from rclpy.utilities import remove_ros_args
 from sensor_msgs.msg import FluidPressure
 from std_msgs.msg import Float64
 
-from fpc_gripper.control.inverse import InverseModel
-from fpc_gripper.control.virtual_object import ContactMethod
-from fpc_gripper.control.virtual_object import VirtualCylinder
+from fpc_gripper.control.virtual_object import VirtualObject
+from fpc_gripper.grasp.objects import make_object
+from fpc_gripper.grasp.objects import OBJECTS
 from fpc_gripper.io.config import default_gripper_config_path
 from fpc_gripper.io.config import load_gripper_config
 from fpc_gripper.io.messages import gripper_topics
@@ -44,15 +44,18 @@ _RELIABLE = QoSProfile(depth=10, history=HistoryPolicy.KEEP_LAST,
 
 class VirtualObjectNode(Node):
     """
-    A virtual cylinder on the palm axis: publishes ``finger_<i>/tip_force`` for every finger.
+    A virtual object in the palm: publishes ``finger_<i>/tip_force`` for every finger.
 
-    On each measured pressure ``finger_<i>/pressure`` it publishes the contact force of
-    :class:`fpc_gripper.control.virtual_object.VirtualCylinder` (f0 = 0, p0 >= 0, frame
-    ``finger_<i>``). It also reads the tip of the model node's ``finger_<i>/shape`` and
-    records, while in contact, the distance between the modelled tip radius and the
-    surface (`residuals`): fed with these forces, the model node must put the tips on
-    the surface. Shapes are taken raw and only the tip is decoded (a 129-pose Path costs
-    milliseconds as Python objects).
+    On each measured pressure ``finger_<i>/pressure`` it solves that finger's contact with
+    the object (:class:`fpc_gripper.control.virtual_object.VirtualObject`: frictionless,
+    along the whole finger, on the contact model) and publishes its resultant as a
+    WrenchStamped in frame ``finger_<i>``: force.x, force.z the contact force on the
+    finger [N], torque.y its moment about the fingertip [N m] (the wrench at the tip
+    equivalent to the contact loads). It also reads the tip of the model node's
+    ``finger_<i>/shape`` and records, while in contact, its distance from the contact
+    model's tip (`residuals`): how far the model node's tip-force finger is from the
+    finger in contact. Shapes are taken raw and only the tip is decoded (a 129-pose Path
+    costs milliseconds as Python objects).
 
     Parameters
     ----------
@@ -67,11 +70,17 @@ class VirtualObjectNode(Node):
         positive = float_range(1e-3, 0.5)
         self.declare_parameter('gripper_config', str(default_gripper_config_path()),
                                ParameterDescriptor(description='Gripper YAML.', read_only=True))
+        self.declare_parameter('object', 'cylinder', ParameterDescriptor(
+            description='cylinder (coaxial with the palm axis), sphere (centred on it) or box '
+                        '(D x D section, across the palm).', read_only=True,
+            additional_constraints=f'one of {list(OBJECTS)}'))
         self.declare_parameter('object_diameter', 0.040, ParameterDescriptor(
-            description='Cylinder diameter D [m], on the palm axis.', read_only=True,
-            floating_point_range=positive))
+            description='Object size D [m].', read_only=True, floating_point_range=positive))
+        self.declare_parameter('object_height', 0.0, ParameterDescriptor(
+            description="Height of the object's lowest point above the palm [m].",
+            read_only=True, floating_point_range=float_range(0.0, 0.5)))
         self.declare_parameter('method', 'exact', ParameterDescriptor(
-            description="'exact' (rigid: rho = D/2) or 'penalty' (compliant, stiffness_n_m).",
+            description="'exact' (rigid) or 'penalty' (compliant, stiffness_n_m).",
             read_only=True, additional_constraints="one of ['exact', 'penalty']"))
         self.declare_parameter('stiffness_n_m', 200.0, ParameterDescriptor(
             description='Surface stiffness of the penalty method [N/m].', read_only=True,
@@ -81,20 +90,17 @@ class VirtualObjectNode(Node):
             floating_point_range=float_range(3e4, 1.2e5)))
         param = self.get_parameter
         config = load_gripper_config(param('gripper_config').value)
+        method = param('method').value
+        if method not in ('exact', 'penalty'):
+            raise ValueError(f"`method` must be 'exact' or 'penalty', got {method!r}")
         self._names = config.names
         self._palm_radius = config.palm_radius
-        cylinders = {}
-        self._cylinders = []
-        for finger in config.fingers:
-            if finger.design not in cylinders:
-                model = InverseModel(finger.design, config.palm_radius, config.max_pressure)
-                cylinders[finger.design] = VirtualCylinder(
-                    param('object_diameter').value, model,
-                    method=ContactMethod(param('method').value),
-                    stiffness=param('stiffness_n_m').value)
-                cylinders[finger.design].force(0.0)   # build the table now, not mid-session
-            self._cylinders.append(cylinders[finger.design])
-        self.forces = [0.0] * len(self._names)
+        self.object = make_object(param('object').value, param('object_diameter').value,
+                                  param('object_height').value)
+        self.exact = method == 'exact'
+        self.virtual = VirtualObject(self.object, config, penalty=0.0 if self.exact
+                                     else param('stiffness_n_m').value)
+        self.contacts = [None] * len(self._names)
         self.residuals = collections.deque(maxlen=100000)
         self._pubs = tuple(self.create_publisher(WrenchStamped, f'{n}/tip_force', _RELIABLE)
                            for n in self._names)
@@ -105,45 +111,51 @@ class VirtualObjectNode(Node):
             self.create_subscription(Path, f'{name}/shape', functools.partial(self._on_shape, i),
                                      _RELIABLE, raw=True)
         self.get_logger().info(
-            f'cylinder D = {param("object_diameter").value * 1e3:.1f} mm '
-            f'({param("method").value}); the free tips touch it below '
-            f'{self._cylinders[0].touch_pressure:.0f} Pa gauge')
+            f'{param("object").value} D = {param("object_diameter").value * 1e3:.1f} mm '
+            f'({method}); the free fingers touch it below '
+            f'{self.virtual.touch_pressure:.0f} Pa gauge')
 
     @property
-    def radius(self):
-        """Cylinder radius [m]."""
-        return self._cylinders[0].radius
+    def forces(self):
+        """Latest normal force on every finger [N] (0 before any contact)."""
+        return [0.0 if c is None else c.normal_force for c in self.contacts]
+
+    def arcs(self):
+        """Latest contact arc (start, end) [m] of every finger, or None."""
+        return [None if c is None else c.arc for c in self.contacts]
 
     def _on_pressure(self, index, msg):
         gauge = msg.fluid_pressure - self.get_parameter('atmospheric_pressure').value
         if not math.isfinite(gauge):
             return
         try:
-            force = self._cylinders[index].force(max(gauge, 0.0))
+            contact = self.virtual.contact(index, max(gauge, 0.0))
         except (RuntimeError, ValueError, ArithmeticError) as exc:
             # No contact force can be given for this pressure: publish none, so the model
             # node keeps the last one it had.
-            self.get_logger().error(f'{self._names[index]}: no contact force at {gauge:.0f} '
-                                    f'Pa gauge: {exc}', throttle_duration_sec=2.0)
+            self.get_logger().error(f'{self._names[index]}: no contact at {gauge:.0f} Pa '
+                                    f'gauge: {exc}', throttle_duration_sec=2.0)
             return
-        self.forces[index] = force
+        self.contacts[index] = contact
         out = WrenchStamped()
         out.header.stamp = self.get_clock().now().to_msg()
         out.header.frame_id = self._names[index]
-        out.wrench.force.z = force
+        out.wrench.force.x, out.wrench.force.z = contact.force
+        out.wrench.torque.y = contact.torque
         self._pubs[index].publish(out)
 
     def _on_shape(self, index, data):
-        if self.forces[index] <= 0.0 or self._cylinders[index].method is not ContactMethod.EXACT:
+        contact = self.contacts[index]
+        if contact is None or not contact.in_contact or not self.exact:
             return
         z = _path_tip_z(data)
         if z is None:
             return
-        rho = self._palm_radius + z
-        self.residuals.append((self.get_clock().now().nanoseconds * 1e-9, abs(rho - self.radius)))
+        self.residuals.append((self.get_clock().now().nanoseconds * 1e-9,
+                               abs(z - contact.tip[1])))
 
     def residual(self, start, end):
-        """Largest |rho_tip - D/2| of the model node's shapes in contact in [start, end] [m]."""
+        """Largest |Z_tip(model node) - Z_tip(contact)| of the shapes in [start, end] [m]."""
         return max((r for t, r in self.residuals if start <= t <= end), default=math.nan)
 
 
@@ -187,6 +199,10 @@ class Phase:
         Node-clock times [s].
     final : dict
         Last controller_state values of the phase.
+    arcs : list
+        Contact arc (start, end) [m] of every finger at the end of the phase, or None.
+    holding : float
+        Holding force of the grasp at the end of the phase [N] (hold phase only).
 
     """
 
@@ -200,6 +216,8 @@ class Phase:
     end: float = math.nan
     detail: str = ''
     final: dict = field(default_factory=dict)
+    arcs: list = field(default_factory=list)
+    holding: float = math.nan
 
 
 class SessionScript(Node):
@@ -208,17 +226,20 @@ class SessionScript(Node):
 
     An aperture or grasp phase publishes its goal and waits for ``controller_state`` to
     report that goal (same target) as reached, then dwells `dwell_s`. A hold phase checks
-    for its duration that the goal stays reached and that every contact force stays
-    within `force_band` of the grasp force. `done` completes after the last phase or the
-    first failure.
+    for its duration that the goal stays reached and that every finger's normal force
+    stays within `force_band` of its share of the grasp force. `done` completes after the
+    last phase or the first failure; `arcs` (optional) gives every finger's contact arc,
+    stored with each phase as it ends.
     """
 
-    def __init__(self, phases, grasp_force, dwell_s=0.5, force_band=0.10, **kwargs):
+    def __init__(self, phases, grasp_force, dwell_s=0.5, force_band=0.10, arcs=None,
+                 **kwargs):
         super().__init__('session_script', **kwargs)
         self.phases = list(phases)
         self.grasp_force = float(grasp_force)
         self.dwell_s = float(dwell_s)
         self.force_band = float(force_band)
+        self._arcs = arcs
         self.done = Future()
         self.state = {}
         self._index = -1
@@ -262,6 +283,8 @@ class SessionScript(Node):
         phase.reached = reached
         phase.detail = detail or phase.detail
         phase.final = dict(self.state)
+        if self._arcs is not None:
+            phase.arcs = list(self._arcs())
         if not reached or self._index + 1 >= len(self.phases):
             for rest in self.phases[self._index + 1:]:
                 rest.detail = 'not run'
@@ -295,9 +318,10 @@ class SessionScript(Node):
         status = self.state.get('goal_status', '')
         if phase.kind == 'hold':
             forces = [float(v) for k, v in self.state.items() if k.endswith('contact_force_n')]
-            worst = max((abs(f - self.grasp_force) for f in forces), default=math.inf)
+            share = self.grasp_force / max(len(forces), 1)
+            worst = max((abs(f - share) for f in forces), default=math.inf)
             phase.final = dict(self.state)
-            if status != 'reached' or worst > self.force_band * self.grasp_force:
+            if status != 'reached' or worst > self.force_band * share:
                 self._finish(now, False, f'left the goal: status {status}, worst force error '
                                          f'{worst:.3f} N')
             elif elapsed >= phase.value:
@@ -315,7 +339,7 @@ class SessionScript(Node):
             self._finish(now, False, f'not reached in {phase.timeout:.1f} s (status {status})')
 
 
-def default_phases(open_aperture=0.120, grasp_force=0.5, hold_s=3.0):
+def default_phases(open_aperture=0.120, grasp_force=1.5, hold_s=3.0):
     """Open, close on the object and grasp, hold, release (open)."""
     return [Phase('open', 'aperture', open_aperture, timeout=8.0),
             Phase('grasp', 'grasp', grasp_force, timeout=10.0),
@@ -323,10 +347,19 @@ def default_phases(open_aperture=0.120, grasp_force=0.5, hold_s=3.0):
             Phase('release', 'aperture', open_aperture, timeout=8.0)]
 
 
-def run_session(output_dir, object_diameter=0.040, grasp_force=0.5, open_aperture=0.120,
-                hold_s=3.0, context=None, gripper_config=None):
+def run_session(output_dir, object_diameter=0.040, grasp_force=1.5, open_aperture=0.120,
+                hold_s=3.0, context=None, gripper_config=None, obj='cylinder', mu=0.5):
     """
     Build every node on one executor, run the session and close the recording.
+
+    Parameters
+    ----------
+    obj : {'cylinder', 'sphere', 'box'}
+        The virtual object (resting on the palm), of size `object_diameter` [m].
+    grasp_force : float
+        Total normal force on the object to grasp with [N].
+    mu : float
+        Friction coefficient of the holding force reported for the hold phase [-].
 
     Returns
     -------
@@ -362,9 +395,11 @@ def run_session(output_dir, object_diameter=0.040, grasp_force=0.5, open_apertur
             cfg, Parameter('pressure_input', value='measured'),
             Parameter('max_rate_hz', value=10.0), Parameter('rigidity_rate_hz', value=0.0)],
             **common))
-        nodes.append(GripperController(parameter_overrides=[cfg], **common))
-        virtual = VirtualObjectNode(parameter_overrides=[
-            cfg, Parameter('object_diameter', value=float(object_diameter))], **common)
+        described = [Parameter('object', value=obj),
+                     Parameter('object_diameter', value=float(object_diameter))]
+        # The controller is told the object, as a robot is by its perception.
+        nodes.append(GripperController(parameter_overrides=[cfg, *described], **common))
+        virtual = VirtualObjectNode(parameter_overrides=[cfg, *described], **common)
         nodes.append(virtual)
         topics = [t for t in gripper_topics(config.names) if not t.endswith('/rigidity')]
         recorder = McapRecorder(parameter_overrides=[
@@ -373,7 +408,7 @@ def run_session(output_dir, object_diameter=0.040, grasp_force=0.5, open_apertur
             Parameter('gripper_config', value=config_path)], **common)
         nodes.append(recorder)
         script = SessionScript(default_phases(open_aperture, grasp_force, hold_s),
-                               grasp_force, **common)
+                               grasp_force, arcs=virtual.arcs, **common)
         nodes.append(script)
         controller = nodes[2]
         for node in nodes:
@@ -383,6 +418,12 @@ def run_session(output_dir, object_diameter=0.040, grasp_force=0.5, open_apertur
         max_command = controller.max_command_seen if hasattr(
             controller, 'max_command_seen') else math.nan
         recorder.close()
+        for phase in script.phases:
+            if phase.kind == 'hold' and phase.reached:
+                pressures = [float(v) for k, v in phase.final.items()
+                             if k.endswith('command_pa')]
+                phase.holding = virtual.virtual.holding_force(
+                    sum(pressures) / len(pressures), mu).holding_force
         info = {'mcap': mcap_path, 'messages': recorder_count(mcap_path),
                 'contact_residual': max((virtual.residual(p.start, p.end)
                                          for p in script.phases if p.kind == 'hold'),
@@ -419,7 +460,7 @@ def _series(mcap_path, atmospheric):
             start = rec.log_time if start is None else start
             msg = rec.ros_msg
             if rec.topic.endswith('/tip_force'):
-                value = msg.wrench.force.z
+                value = math.hypot(msg.wrench.force.x, msg.wrench.force.z)
             elif rec.topic.endswith(('/pressure', '/pressure_command')):
                 value = (msg.fluid_pressure - atmospheric) * 1e-3
             else:
@@ -443,7 +484,7 @@ def make_chart(mcap_path, png_path, phases, grasp_force, atmospheric=101325.0):
     phases : list of Phase
         Drawn as shaded spans.
     grasp_force : float
-        [N], drawn as a reference line.
+        Total normal force goal [N]; its share per finger is drawn as a reference line.
     atmospheric : float
         Subtracted from the absolute pressures [Pa].
 
@@ -456,7 +497,7 @@ def make_chart(mcap_path, png_path, phases, grasp_force, atmospheric=101325.0):
     t0 = min((t[0] for t, _ in data.values() if t), default=0.0)
     fig, axes = plt.subplots(4, 1, figsize=(11, 11), sharex=True)
     rows = [('/aperture', 'aperture [mm]', 1e3), ('pressure', 'pressure [kPa gauge]', 1.0),
-            ('/curvature', 'curvature [1/m]', 1.0), ('/tip_force', 'contact force p0 [N]', 1.0)]
+            ('/curvature', 'curvature [1/m]', 1.0), ('/tip_force', 'contact force |F| [N]', 1.0)]
     for ax, (suffix, label, scale) in zip(axes, rows):
         for topic in sorted(data):
             t, v = data[topic]
@@ -473,7 +514,8 @@ def make_chart(mcap_path, png_path, phases, grasp_force, atmospheric=101325.0):
                         else 'model estimate')
         ax.set_ylabel(label)
         ax.grid(True, alpha=0.3)
-    axes[3].axhline(grasp_force, color='k', ls=':', lw=1, label=f'goal {grasp_force:g} N')
+    share = grasp_force / max(1, sum(t.endswith('/tip_force') for t in data))
+    axes[3].axhline(share, color='k', ls=':', lw=1, label=f'goal per finger {share:.3g} N')
     for phase in phases:
         if math.isfinite(phase.start):
             end = phase.end if math.isfinite(phase.end) else phase.start
@@ -488,16 +530,24 @@ def make_chart(mcap_path, png_path, phases, grasp_force, atmospheric=101325.0):
     for ax in axes:
         ax.legend(fontsize=7, ncol=3, loc='upper right')
     axes[-1].set_xlabel('time [s]')
-    fig.suptitle('fpc_gripper scripted session (simulated regulator, virtual cylinder)')
+    fig.suptitle('fpc_gripper scripted session (simulated regulator, virtual object)')
     fig.tight_layout()
     fig.savefig(png_path, dpi=90)
     plt.close(fig)
 
 
+def _arc_text(arc):
+    """'s0-s1' in mm of a contact arc, a single value for a point, '-' for none."""
+    if arc is None:
+        return '-'
+    start, end = arc[0] * 1e3, arc[1] * 1e3
+    return f'{start:.1f}' if end - start < 0.05 else f'{start:.1f}-{end:.1f}'
+
+
 def format_summary(phases, info):
     """Return the summary table printed at the end of the session."""
     lines = [f'{"phase":<9} {"goal":>12} {"result":>8} {"t_goal[s]":>9} {"aperture[mm]":>12} '
-             f'{"force[N]":>22}  detail']
+             f'{"normal force[N]":>22} {"contact arc s[mm]":>32} {"holding[N]":>10}  detail']
     for p in phases:
         goal = {'aperture': f'{p.value * 1e3:.1f} mm', 'grasp': f'{p.value:.3f} N',
                 'hold': f'{p.value:.1f} s'}[p.kind]
@@ -505,12 +555,14 @@ def format_summary(phases, info):
         aperture = f'{float(aperture) * 1e3:.2f}' if aperture else '-'
         forces = [v for k, v in sorted(p.final.items()) if k.endswith('contact_force_n')]
         forces = ' '.join(f'{float(f):.3f}' for f in forces) or '-'
+        arcs = ' '.join(_arc_text(a) for a in p.arcs) or '-'
+        holding = f'{p.holding:.3f}' if math.isfinite(p.holding) else '-'
         result = 'REACHED' if p.reached else 'FAILED'
         lines.append(f'{p.name:<9} {goal:>12} {result:>8} {p.time_to_goal:>9.2f} '
-                     f'{aperture:>12} {forces:>22}  {p.detail}')
+                     f'{aperture:>12} {forces:>22} {arcs:>32} {holding:>10}  {p.detail}')
     lines.append(f'recording: {info["mcap"]} ({info["messages"]} messages); largest command '
                  f'{info["max_command"] * 1e-3:.1f} kPa (limit {info["max_pressure"] * 1e-3:.0f});'
-                 f' model-node tip to cylinder surface during hold '
+                 f' model-node tip (tip-force model) to the contact model tip during hold '
                  f'{info["contact_residual"] * 1e3:.3f} mm; wall time {info["wall_s"]:.1f} s')
     return '\n'.join(lines)
 
@@ -520,8 +572,13 @@ def main(args=None):
     argv = remove_ros_args(sys.argv if args is None else args)
     parser = argparse.ArgumentParser(prog='gripper_demo', description=__doc__)
     parser.add_argument('--output-dir', default='.', help='writes session.mcap and session.png')
+    parser.add_argument('--object', default='cylinder', choices=OBJECTS,
+                        help='virtual object, resting on the palm')
     parser.add_argument('--object-diameter', type=float, default=0.040, help='[m]')
-    parser.add_argument('--grasp-force', type=float, default=0.5, help='per fingertip [N]')
+    parser.add_argument('--grasp-force', type=float, default=1.5,
+                        help='total normal force on the object [N]')
+    parser.add_argument('--mu', type=float, default=0.5,
+                        help='friction coefficient of the reported holding force [-]')
     parser.add_argument('--open-aperture', type=float, default=0.120, help='[m]')
     parser.add_argument('--hold', type=float, default=3.0, help='hold duration [s]')
     parser.add_argument('--gripper-config', default=None, help='gripper YAML')
@@ -531,7 +588,8 @@ def main(args=None):
     try:
         phases, info = run_session(options.output_dir, options.object_diameter,
                                    options.grasp_force, options.open_aperture, options.hold,
-                                   gripper_config=options.gripper_config)
+                                   gripper_config=options.gripper_config,
+                                   obj=options.object, mu=options.mu)
     except (KeyboardInterrupt, ExternalShutdownException):
         return 130
     finally:

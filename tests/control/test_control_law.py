@@ -10,7 +10,9 @@ from fpc_gripper.control.controller import (ControllerConfig, FingerMeasurement,
                                             GoalStatus, GripperControlLaw, Level, Mode)
 from fpc_gripper.control.geometry import PalmGeometry
 from fpc_gripper.control.inverse import InverseModel
-from fpc_gripper.control.virtual_object import VirtualCylinder
+from fpc_gripper.control.virtual_object import VirtualObject
+from fpc_gripper.grasp import FingerGrasp, make_object
+from fpc_gripper.io.config import load_gripper_config
 from fpc_gripper.model import ActuatorDesign
 
 DESIGN = ActuatorDesign.paper(prestrain=0.25)
@@ -145,20 +147,29 @@ def test_tip_force_step_is_rejected(model, solver):
     assert np.all(np.abs(aperture[t > SETTLING_S] - 0.080) < 1e-3)
 
 
-@pytest.mark.parametrize('method', ['exact', 'penalty'])
-def test_grasp_reaches_the_contact_force(model, method):
-    cylinder = VirtualCylinder(0.040, model, method=method, stiffness=150.0)
-    law = make_law(model)
-    loop = Loop(law, tip_force=lambda i, p: cylinder.contact(p).tip_force)
-    law.set_aperture(0.100, loop.clock.now)
+@pytest.mark.parametrize('kind, known', [('cylinder', True), ('sphere', True),
+                                         ('cylinder', False)])
+def test_grasp_reaches_the_total_normal_force(model, kind, known):
+    """The law regulates the sum of the normal forces; the plant is the contact model."""
+    config = load_gripper_config()
+    obj = make_object(kind, 0.040 if kind == 'cylinder' else 0.050)
+    virtual = VirtualObject(obj, config)
+    grasps = [FingerGrasp(f.design, obj.section(f.mount_angle, config.palm_radius),
+                          config.max_pressure) for f in config.fingers] if known else None
+    law = GripperControlLaw([model] * 3, PalmGeometry(PALM_RADIUS, THIRDS),
+                            ControllerConfig(), grasps)
+    loop = Loop(law, tip_force=lambda i, p: virtual.contact(i, p).force)
+    law.set_aperture(0.120, loop.clock.now)
     loop.run(2.0)
-    law.set_grasp_force(0.4, loop.clock.now)
-    out = loop.run(5.0)
+    law.set_grasp_force(1.2, loop.clock.now)
+    out = loop.run(6.0)
     assert out.status is GoalStatus.REACHED, out.message
     assert all(f.phase is FingerPhase.CONTACT for f in out.fingers)
-    # Independent: the force the object exerts at the regulator's true pressure.
-    forces = [cylinder.exact_force(loop.regulator.true_pressure(i)) for i in range(3)]
+    # Independent: the normal forces the object takes at the regulator's true pressures.
+    forces = [virtual.contact(i, loop.regulator.true_pressure(i)).normal_force
+              for i in range(3)]
     np.testing.assert_allclose(forces, 0.4, rtol=0.03)
+    assert sum(forces) == pytest.approx(1.2, rel=0.03)
 
 
 def test_stalled_when_the_pressure_never_comes(model):

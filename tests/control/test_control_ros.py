@@ -1,4 +1,4 @@
-"""GripperController with real rclpy nodes: simulated regulator, virtual cylinder, faults."""
+"""GripperController with real rclpy nodes: simulated regulator, virtual object, faults."""
 
 import itertools
 import math
@@ -11,16 +11,20 @@ from geometry_msgs.msg import WrenchStamped
 import numpy as np
 import pytest
 import rclpy
+from rclpy.exceptions import ParameterException
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from rclpy.qos import qos_profile_sensor_data
 from rclpy.qos import QoSProfile
 from rclpy.qos import ReliabilityPolicy
-from scipy.optimize import brentq
 from sensor_msgs.msg import FluidPressure
 from std_msgs.msg import Float64
 
+from fpc_gripper.grasp import make_object
 from fpc_gripper.io.config import load_gripper_config
+from fpc_gripper.model.contact import solve_contact
+from fpc_gripper.model.pcc import PCCSolver
+from fpc_gripper.model.pipeline import contact_segments, ModelSettings
 from fpc_gripper.nodes.gripper_controller import GripperController
 from fpc_gripper.nodes.gripper_demo import VirtualObjectNode
 from fpc_gripper.nodes.regulator_bridge import RegulatorBridge
@@ -277,9 +281,9 @@ def test_lost_pressure_feedback_holds_when_asked(rig):
     assert ATM + 100.0e3 < held <= ATM + CONFIG.max_pressure     # held, not vented
 
 
-def test_grasp_on_virtual_cylinder_reaches_the_contact_force(rig, solver):
-    diameter, force = 0.040, 0.5
-    r = rig(virtual_object=diameter)
+def test_grasp_on_a_virtual_object_reaches_the_total_normal_force(rig):
+    diameter, force = 0.040, 1.5
+    r = rig(virtual_object=diameter, object='cylinder', object_diameter=diameter)
     r.goal('aperture', 0.100)
     r.wait_reached()
     r.goal('grasp', force)
@@ -288,16 +292,30 @@ def test_grasp_on_virtual_cylinder_reaches_the_contact_force(rig, solver):
     r.spin_for(1.0)
     _, pressures = r.samples(start)
     assert pressures.shape[0] > 20
-    # Independent: the p0 that holds the raw model's tip on the surface at that pressure.
+    # Independent: a contact model built here, at the measured pressures: 0.5 N a finger.
+    finger = CONFIG.fingers[0]
+    solver = PCCSolver(finger.design, contact_segments(ModelSettings().tolerance))
+    section = make_object('cylinder', diameter).section(0.0, RADIUS)
     for p in pressures.mean(axis=0):
-        def gap(p0):
-            result = solver.solve(p, tip_force=(0.0, p0))
-            assert result.success
-            return RADIUS + result.tip[1] - diameter / 2
-        assert brentq(gap, 0.0, 3.0, xtol=1e-6) == pytest.approx(force, rel=0.10)
-    published = [m.wrench.force.z for msgs in r.tip_forces.values() for m in msgs[-10:]]
-    assert np.mean(published) == pytest.approx(force, rel=0.10)
+        normal = solve_contact(solver, p, section).normal_force_total
+        assert normal == pytest.approx(force / 3, rel=0.10)
+    published = [math.hypot(m.wrench.force.x, m.wrench.force.z)
+                 for msgs in r.tip_forces.values() for m in msgs[-10:]]
+    assert np.mean(published) == pytest.approx(force / 3, rel=0.10)
+    assert float(r.state()['normal_force_n']) == pytest.approx(force, rel=0.10)
     assert r.max_command() <= CONFIG.max_pressure
+
+
+def test_a_bad_object_is_refused_naming_it(ros):
+    context, _ = ros
+    for bad, word in (('cone', 'object'), ('sphere', 'diameter')):
+        overrides = [Parameter('object', value=bad)]
+        if bad == 'sphere':
+            # A NaN size is refused, by the parameter's range or by the object itself.
+            overrides.append(Parameter('object_diameter', value=float('nan')))
+        with pytest.raises((ValueError, ParameterException), match=word):
+            GripperController(namespace=f'/gc{next(_counter)}', context=context,
+                              parameter_overrides=overrides)
 
 
 def test_parameters_are_validated(ros):

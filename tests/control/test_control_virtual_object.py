@@ -1,92 +1,76 @@
-"""Virtual cylinder: contact forces against independent solves of the finger model."""
+"""Virtual object: each finger's contact against independent solves of the contact model."""
 
-from control_sim import fresh_solver, PALM_RADIUS
 import numpy as np
 import pytest
 
-from fpc_gripper.control.inverse import InverseModel
-from fpc_gripper.control.virtual_object import VirtualCylinder
-from fpc_gripper.model import ActuatorDesign
+from fpc_gripper.control.virtual_object import VirtualObject
+from fpc_gripper.grasp import make_object
+from fpc_gripper.io.config import load_gripper_config
+from fpc_gripper.model.contact import ContactSettings, solve_contact
+from fpc_gripper.model.pcc import PCCSolver
+from fpc_gripper.model.pipeline import contact_segments, ModelSettings
 
-DESIGN = ActuatorDesign.paper(prestrain=0.25)
-D = 0.040
+CONFIG = load_gripper_config()
 
 
 @pytest.fixture(scope='module')
-def model():
-    return InverseModel(DESIGN, PALM_RADIUS, 400.0e3)
+def sphere():
+    return VirtualObject(make_object('sphere', 0.050), CONFIG)
 
 
 @pytest.fixture(scope='module')
 def solver():
-    return fresh_solver(DESIGN)
+    """A solver of the contact model that shares nothing with the code under test."""
+    return PCCSolver(CONFIG.fingers[0].design, contact_segments(ModelSettings().tolerance))
 
 
-@pytest.fixture(scope='module')
-def cylinder(model):
-    return VirtualCylinder(D, model)
+@pytest.mark.parametrize('pressure', [0.0, 30.0e3])
+def test_contact_is_the_contact_model_at_that_pressure(sphere, solver, pressure):
+    finger = CONFIG.fingers[1]
+    contact = sphere.contact(1, pressure)
+    section = make_object('sphere', 0.050).section(finger.mount_angle, CONFIG.palm_radius)
+    reference = solve_contact(solver, pressure, section)
+    assert contact.in_contact
+    assert contact.normal_force == pytest.approx(reference.normal_force_total, rel=1e-9)
+    on_finger = reference.force.sum(axis=0)
+    assert contact.force == pytest.approx(tuple(on_finger), rel=1e-9, abs=1e-12)
+    # Force at the tip plus the torque is the same wrench as the contact forces.
+    arm = reference.position - reference.tip
+    moment = np.sum(arm[:, 1] * reference.force[:, 0] - arm[:, 0] * reference.force[:, 1])
+    assert contact.torque == pytest.approx(moment, rel=1e-9, abs=1e-12)
+    assert contact.arc == reference.contact_arc()
 
 
-def rho_of(solver, pressure, tip_force=(0.0, 0.0)):
-    result = solver.solve(pressure, tip_force=tip_force)
-    assert result.success, result.message
-    return PALM_RADIUS + result.tip[1]
+def test_force_falls_with_pressure_and_vanishes_past_the_touch_pressure(sphere):
+    touch = sphere.touch_pressure
+    pressures = np.linspace(0.0, touch, 7)[:-1]
+    forces = [sphere.contact(0, p).normal_force for p in pressures]
+    assert np.all(np.diff(forces) < 0.0)
+    assert sphere.contact(0, touch + 1.0e3).normal_force == 0.0
+    assert not sphere.contact(0, 300e3).in_contact
+    assert sphere.total_normal_force([0.0] * 3) == pytest.approx(3 * forces[0], rel=1e-9)
 
 
-@pytest.mark.parametrize('pressure', [0.0, 50.0e3, 120.0e3])
-def test_exact_force_puts_the_loaded_tip_on_the_surface(cylinder, solver, pressure):
-    force = cylinder.exact_force(pressure)
-    assert force > 0.0
-    assert rho_of(solver, pressure, (0.0, force)) == pytest.approx(D / 2, abs=1e-6)
+def test_compliant_object_is_a_penalty_surface(solver):
+    """lambda = k max(-g, 0) at every point, and it pushes less than a rigid one."""
+    obj = make_object('cylinder', 0.040)
+    stiffness = 500.0
+    soft = VirtualObject(obj, CONFIG, penalty=stiffness)
+    rigid = VirtualObject(obj, CONFIG)
+    section = obj.section(0.0, CONFIG.palm_radius)
+    state = solve_contact(solver, 60e3, section, settings=ContactSettings(penalty=stiffness))
+    np.testing.assert_allclose(state.normal_force, stiffness * np.maximum(-state.gap, 0.0),
+                               atol=1e-9)
+    assert soft.contact(0, 60e3).normal_force == pytest.approx(state.normal_force_total,
+                                                               rel=1e-9)
+    assert 0.0 < soft.contact(0, 60e3).normal_force < rigid.contact(0, 60e3).normal_force
 
 
-def test_touch_pressure_and_no_force_outside(cylinder, solver):
-    assert rho_of(solver, cylinder.touch_pressure) == pytest.approx(D / 2, abs=1e-6)
-    assert cylinder.force(cylinder.touch_pressure + 1.0e3) == 0.0
-    assert cylinder.force(300.0e3) == 0.0
-    contact = cylinder.contact(300.0e3)
-    assert not contact.in_contact and contact.penetration < 0.0
+def test_holding_force_comes_from_the_grasp_api(sphere):
+    point = sphere.holding_force(0.0, 0.5)
+    assert point.success and point.holding_force > 0.0
 
 
-def test_table_follows_the_exact_force(cylinder):
-    pressures = np.linspace(0.0, cylinder.touch_pressure, 17)[1:-1] + 1234.5
-    table = [cylinder.force(p) for p in pressures]
-    exact = [cylinder.exact_force(p) for p in pressures]
-    # 5e-4 N: next to the touch pressure the adaptive model switches from the unloaded
-    # scene's discretisation (where the table ends at 0 N) to a loaded one.
-    np.testing.assert_allclose(table, exact, atol=5e-4)
-    assert np.all(np.diff(table) < 0.0)       # less pressure, a harder push on the object
-
-
-def test_contact_state(cylinder):
-    contact = cylinder.contact(80.0e3)
-    assert contact.in_contact and contact.penetration > 0.0
-    assert contact.rho == pytest.approx(D / 2)
-    assert contact.tip_force == (0.0, contact.force)
-
-
-def test_penalty_contact_is_a_consistent_compliant_equilibrium(model, solver):
-    stiffness = 100.0
-    soft = VirtualCylinder(D, model, method='penalty', stiffness=stiffness)
-    pressure = 80.0e3
-    force = soft.exact_force(pressure)
-    rho = rho_of(solver, pressure, (0.0, force))
-    assert force == pytest.approx(stiffness * (D / 2 - rho), abs=1e-6)
-    assert 0.0 < force < VirtualCylinder(D, model).exact_force(pressure)
-
-
-def test_objects_out_of_reach(model):
-    assert VirtualCylinder(0.002, model).force(0.0) == 0.0       # inside the closed tips
-    wide = VirtualCylinder(0.190, model)                          # wider than fully open
-    assert wide.touch_pressure == model.max_pressure
-    assert wide.force(model.max_pressure) > 0.0
-
-
-@pytest.mark.parametrize('kwargs, word', [
-    ({'diameter': 0.0}, 'diameter'), ({'method': 'penalty', 'stiffness': -1.0}, 'stiffness'),
-    ({'table_step': 0.0}, 'table_step'),
-])
-def test_bad_arguments(model, kwargs, word):
-    args = {'diameter': D, **kwargs}
-    with pytest.raises(ValueError, match=word):
-        VirtualCylinder(model=model, **args)
+def test_bad_penalty_is_refused():
+    with pytest.raises(ValueError, match='penalty'):
+        VirtualObject(make_object('sphere', 0.05), CONFIG, penalty=-1.0)

@@ -1,5 +1,6 @@
 """The gripper_demo console script end to end, its recording read by an independent decoder."""
 
+import math
 import os
 import pathlib
 import subprocess
@@ -31,6 +32,11 @@ def test_demo_session_passes_and_records(tmp_path):
     for phase in ('open', 'grasp', 'hold', 'release'):
         assert any(line.startswith(phase) and 'REACHED' in line
                    for line in run.stdout.splitlines()), run.stdout
+    # The table gives each finger's contact arc (the 40 mm cylinder: the fingertips) and the
+    # holding force of the hold.
+    hold = next(line for line in run.stdout.splitlines() if line.startswith('hold'))
+    assert hold.split()[-4:-1] == ['90.0'] * 3
+    assert 0.1 < float(hold.split()[-1]) < 2.0
     png = tmp_path / 'session.png'
     assert png.read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
     # rosbags, a second reader, decodes every message of the recording.
@@ -48,8 +54,10 @@ def test_demo_session_passes_and_records(tmp_path):
         commands = topics[f'/finger_{i}/pressure_command']
         assert len(commands) > 100
         assert max(m.fluid_pressure for m in commands) <= ATM + limit
-        forces = [m.wrench.force.z for m in topics[f'/finger_{i}/tip_force']]
-        # Grasped, and released: out of contact the cylinder returns 0.0 itself (exact).
+        forces = [math.hypot(m.wrench.force.x, m.wrench.force.z)
+                  for m in topics[f'/finger_{i}/tip_force']]
+        # Grasped (1.5 N in all: 0.5 N a finger), and released: out of contact the object
+        # returns 0.0 itself (exact).
         assert max(forces) > 0.4 and min(forces) == 0.0
     states = [m for m in topics['/controller_state']]
     assert {kv.value for m in states for kv in m.values if kv.key == 'goal_status'} \

@@ -198,7 +198,10 @@ def test_every_hook_is_a_compiled_kernel(kind):
     data = solver.kernel_data(loaded)
     assert type(data).__name__ == kind
     hooks = type(data)._kernels
-    assert sorted(hooks) == ['derivatives', 'energy', 'node_jacobian', 'solve_linear', 'step']
+    base = ['derivatives', 'energy', 'node_jacobian', 'solve_linear', 'step']
+    # The PCC has face points too (contact): docs/physics.md, section 15.2.
+    points = ['point_derivatives', 'point_jacobian', 'point_positions']
+    assert sorted(hooks) == sorted(base + (points if kind == 'PCCData' else []))
     x, pressure, nodes, forces = _hook_arguments(solver, data, loaded)
     energy, grad, hess = hooks['derivatives'](data, x, pressure, nodes, forces)
     # The line search compares this energy with the derivatives' one: the same formula.
@@ -224,6 +227,20 @@ def test_every_hook_is_a_compiled_kernel(kind):
     position, jacobian = hooks['node_jacobian'](data, x, _tip(solver))
     assert deviation(position, solver.node_jacobian(x, _tip(solver))[0]) <= RTOL
     assert jacobian.shape == (2,) + x.shape
+    if kind == 'PCCData':
+        # Face points: the compiled hooks against the solver's methods (the same kernels).
+        seg, off = np.array([3, 21]), np.array([0.5, 1.0]) * solver.lengths[[3, 21]]
+        z, push = np.array([-0.5, 0.5]) * design.H, np.array([[0.1, -0.2], [0.0, 0.3]])
+        positions = hooks['point_positions'](data, x, seg, off, z)
+        assert deviation(positions, solver.point_positions(x, seg, off, z)) <= RTOL
+        point, jac = hooks['point_jacobian'](data, x, seg[1], off[1], z[1])
+        assert deviation(point, positions[1]) <= RTOL
+        assert deviation(jac, solver.point_jacobian(x, seg[1], off[1], z[1])[1]) <= RTOL
+        got = hooks['point_derivatives'](data, x, pressure, nodes, forces, seg, off, z, push)
+        want = solver.point_derivatives(x, pressure, engine._loads(nodes, forces), seg, off,
+                                        z, push)
+        assert got[0] == pytest.approx(want[0], rel=1e-12)
+        assert deviation(got[1], want[1]) <= RTOL
     for name, hook in hooks.items():
         assert isinstance(hook, numba.core.registry.CPUDispatcher), name
         assert hook.signatures and hook.targetoptions['nopython'], name

@@ -48,8 +48,8 @@ CHANGED = {
         'ki': 1.5, 'kp_force': 0.4, 'ki_force': 2.0, 'control_rate_hz': 40.0,
         'goal_tolerance_m': 0.002, 'force_tolerance': 0.1, 'settle_time_s': 0.2,
         'stall_timeout_s': 8.0, 'feedback_timeout_s': 0.8, 'safe_state': 'hold',
-        'contact_threshold_n': 0.03, 'atmospheric_pressure': 100000.0,
-        'frame_prefix': 'left/'},
+        'contact_threshold_n': 0.03, 'object': 'sphere', 'object_diameter': 0.05,
+        'object_height': 0.002, 'atmospheric_pressure': 100000.0, 'frame_prefix': 'left/'},
     'mcap_recorder': {
         'output_path': '{tmp}/changed.mcap', 'overwrite': True, 'topics': ['/x', 'other'],
         'gripper_config': GRIPPER, 'flush_period_s': 0.5, 'max_file_size_mb': 10.0,

@@ -1,0 +1,157 @@
+"""The ``fpc-grasp`` command: grasp and holding force of an object against grasp pressure."""
+
+import argparse
+import csv
+import math
+import pathlib
+import sys
+
+from fpc_gripper.io.config import load_gripper_config
+from fpc_gripper.io.mcap_writer import atomic_output
+from fpc_gripper.model.pipeline import ModelSettings
+
+from .grasp import GraspSettings, pressure_range, simulate_grasp
+from .objects import make_object, OBJECTS
+
+__all__ = ['build_parser', 'main', 'plot_sweeps', 'write_csv', 'CSV_COLUMNS']
+
+#: Columns of grasp.csv, in order.
+CSV_COLUMNS = ('pressure_pa', 'grasp_force_n', 'holding_force_n', 'fingers_in_contact',
+               'success', 'status')
+
+
+def write_csv(sweep, path):
+    """Write a GraspSweep's rows to `path` (atomically): the columns of CSV_COLUMNS."""
+    columns = sweep.columns()
+    with atomic_output(path) as tmp:
+        with open(tmp, 'w', newline='') as stream:
+            writer = csv.writer(stream)
+            writer.writerow(CSV_COLUMNS)
+            for row in zip(*(columns[c] for c in CSV_COLUMNS)):
+                writer.writerow([f'{v:.10g}' if isinstance(v, float) else v for v in row])
+
+
+def plot_sweeps(sweeps, labels, path, title=''):
+    """
+    Chart grasp force and holding force against grasp pressure, one colour per sweep.
+
+    Parameters
+    ----------
+    sweeps : sequence of GraspSweep
+    labels : sequence of str
+    path : path-like
+        PNG to write (atomically).
+    title : str
+
+    """
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(8, 5))
+    for k, (sweep, label) in enumerate(zip(sweeps, labels)):
+        colour = f'C{k}'
+        pts = sorted(sweep.points, key=lambda p: p.pressure)
+        kpa = [p.pressure * 1e-3 for p in pts]
+        ax.plot(kpa, [p.grasp_force for p in pts], '-', color=colour, marker='o', ms=3,
+                label=f'{label}: grasp force')
+        ax.plot(kpa, [p.holding_force for p in pts], '--', color=colour, marker='s', ms=3,
+                label=f'{label}: holding force (mu = {sweep.mu:g})')
+        failed = [p for p in pts if not p.success]
+        if failed:
+            ax.plot([p.pressure * 1e-3 for p in failed], [0.0] * len(failed), 'x',
+                    color=colour, label=f'{label}: not completed')
+        best = sweep.best
+        if best is not None and best.holding_force > 0.0:
+            ax.annotate(f'best {best.pressure * 1e-3:.0f} kPa',
+                        (best.pressure * 1e-3, best.holding_force), textcoords='offset points',
+                        xytext=(6, 6), fontsize=8, color=colour)
+    ax.set_xlabel('grasp pressure [kPa gauge]')
+    ax.set_ylabel('force [N]')
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=8)
+    ax.set_title(title or 'three-finger grasp')
+    fig.tight_layout()
+    with atomic_output(path) as tmp:
+        fig.savefig(tmp, dpi=100, format='png')
+    plt.close(fig)
+
+
+def build_parser():
+    """Return the argument parser of ``fpc-grasp``."""
+    parser = argparse.ArgumentParser(
+        prog='fpc-grasp', description='Grasp an object with the gripper over a range of grasp '
+        'pressures: grasp force, holding force along the palm axis, best pressure.')
+    parser.add_argument('--object', required=True, choices=OBJECTS,
+                        help='cylinder: coaxial with the palm axis; sphere: centred on it; '
+                             'box: D x D section, lying across the palm')
+    parser.add_argument('--diameter', required=True, type=float, help='object size D [m]')
+    parser.add_argument('--mu', required=True, type=float, help='Coulomb coefficient [-]')
+    parser.add_argument('--pressure', required=True,
+                        help='grasp pressures start:stop:step (or one value) [Pa gauge]')
+    parser.add_argument('--out', required=True, help='output directory (grasp.csv, grasp.png)')
+    parser.add_argument('--height', type=float, default=0.0,
+                        help="height of the object's lowest point above the palm [m] "
+                             '(default 0: resting on it)')
+    parser.add_argument('--gripper-config', default=None, help='gripper YAML (default: the '
+                        "paper's three fingers)")
+    parser.add_argument('--open-pressure', type=float, default=None,
+                        help='pressure the gripper opens to before the object is placed [Pa] '
+                             '(default: the config max_pressure)')
+    parser.add_argument('--tolerance', type=float, default=ModelSettings().tolerance,
+                        help='finger model tolerance [m] (sets the contact model)')
+    parser.add_argument('--pull-step', type=float, default=GraspSettings().pull_step,
+                        help='pull-out step [m]')
+    return parser
+
+
+def main(argv=None):
+    """
+    Run ``fpc-grasp``.
+
+    Returns
+    -------
+    int
+        0 when the sweep ran (rows say whether each grasp succeeded), 1 for bad input (a
+        message on stderr), 2 for bad usage.
+
+    """
+    args = build_parser().parse_args(argv)
+    try:
+        out = pathlib.Path(args.out)
+        pressures = pressure_range(args.pressure)
+        obj = make_object(args.object, args.diameter, args.height)
+        config = load_gripper_config(args.gripper_config)
+        settings = GraspSettings(open_pressure=args.open_pressure, pull_step=args.pull_step,
+                                 model=ModelSettings(tolerance=args.tolerance))
+        out.mkdir(parents=True, exist_ok=True)
+        sweep = simulate_grasp(config, obj, pressures, args.mu, settings)
+        write_csv(sweep, out / 'grasp.csv')
+        label = f'{args.object} D = {args.diameter * 1e3:g} mm'
+        plot_sweeps([sweep], [label], out / 'grasp.png',
+                    title=f'{label}, mu = {args.mu:g}, open at '
+                          f'{sweep.open_pressure * 1e-3:.0f} kPa')
+    except (OSError, TypeError, ValueError) as error:
+        print(f'fpc-grasp: error: {error}', file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print('fpc-grasp: interrupted', file=sys.stderr)
+        return 130
+    print(f'{"pressure[kPa]":>13} {"grasp[N]":>9} {"holding[N]":>10} {"fingers":>7}  status')
+    for p in sweep.points:
+        print(f'{p.pressure * 1e-3:13.1f} {p.grasp_force:9.4f} {p.holding_force:10.4f} '
+              f'{p.fingers_in_contact:7d}  {p.status.name}')
+    best = sweep.best
+    if best is None:
+        print('no grasp pressure was simulated to the end (see status)')
+    elif not math.isfinite(best.holding_force) or best.holding_force <= 0.0:
+        print('no grasp pressure holds the object')
+    else:
+        print(f'best grasp pressure {best.pressure * 1e-3:.1f} kPa: holding force '
+              f'{best.holding_force:.4f} N (grasp force {best.grasp_force:.4f} N)')
+    print(f'wrote {out / "grasp.csv"} and {out / "grasp.png"}')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
