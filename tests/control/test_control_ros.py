@@ -39,6 +39,8 @@ RADIUS = CONFIG.palm_radius
 #: Settling time stated for an aperture step in the ROS loop (message stamps) [s]. The
 #: deterministic ROS-free test holds the law to 1.5 s; this leaves room for scheduling.
 SETTLING_S = 2.5
+#: Feedback timeout of rigs that do not test feedback loss [s] (the default is 0.5 s).
+RIG_FEEDBACK_TIMEOUT_S = 3.0
 _counter = itertools.count()
 
 
@@ -168,6 +170,10 @@ def rig(ros):
     rigs = []
 
     def make(**kwargs):
+        # Every node of the rig shares one thread, so any stall of the test process (a
+        # collection, a compile) ages all readings at once. Tests of other behaviour must
+        # not read that as lost feedback; the fault tests set their own timeout.
+        kwargs.setdefault('feedback_timeout_s', RIG_FEEDBACK_TIMEOUT_S)
         rigs.append(Rig(ros, **kwargs))
         return rigs[-1]
 
