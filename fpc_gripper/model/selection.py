@@ -17,7 +17,7 @@ from .pcc import PCCSolver
 from .section import uniform_edges
 from .section_law import station_layout
 from .solver import CCMSolver, PRESSURE_MODELS, SolverStatus
-from .validation import real_number, real_pair
+from .validation import check_load, real_number
 
 __all__ = ['Scene', 'ModelChoice', 'RUNGS', 'choose_model', 'load_error_model', 'make_solver',
            'scene_turning', 'a_posteriori_error', 'aligned_edges', 'AdaptiveSolver']
@@ -56,11 +56,9 @@ class Scene:
         if not isinstance(self.design, ActuatorDesign):
             raise TypeError(f'`design` must be an ActuatorDesign, got '
                             f'{type(self.design).__name__}')
-        pressure = real_number('pressure', self.pressure, '[Pa]')
-        if pressure < 0.0:
-            raise ValueError(f'`pressure` must be >= 0 (gauge) [Pa], got {pressure}')
+        pressure, force = check_load(self.pressure, self.tip_force, self.design.max_pressure)
         object.__setattr__(self, 'pressure', pressure)
-        object.__setattr__(self, 'tip_force', real_pair('tip_force', self.tip_force, '[N]'))
+        object.__setattr__(self, 'tip_force', force)
         if self.pressure_model not in PRESSURE_MODELS:
             raise ValueError(f'`pressure_model` must be one of {sorted(PRESSURE_MODELS)}, '
                              f'got {self.pressure_model!r}')
