@@ -48,6 +48,7 @@ from fpc_gripper.nodes.model_core import ModelCore
 from fpc_gripper.nodes.parameters import declare_table
 from fpc_gripper.nodes.parameters import float_range
 from fpc_gripper.nodes.parameters import int_range
+from fpc_gripper.safe_yaml import ConfigError
 
 PRESSURE_INPUTS = ('command', 'measured')
 # The model settings every consumer of the finger pipeline defaults to.
@@ -483,12 +484,15 @@ class ModelNode(Node):
 
 
 def main(args=None):
-    """Run the model node until shutdown; 0 on SIGINT or shutdown, 1 on a bad start."""
+    """Run the model node until shutdown; 0 on SIGINT or shutdown, 2 on a bad config, else 1."""
     rclpy.init(args=args)
     node = None
     try:
         node = ModelNode()
         rclpy.spin(node)
+    except ConfigError as exc:
+        get_logger('model_node').fatal(f'invalid config: {exc}')
+        return 2
     except (ValueError, ParameterException) as exc:
         get_logger('model_node').fatal(f'cannot start: {exc}')
         return 1

@@ -319,8 +319,18 @@ class ModbusRegulator:
         method = ('read_holding_registers' if cmap.readback.kind == 'holding'
                   else 'read_input_registers')
         response = self._request(method, cmap.readback.address, count=1)
+        registers = getattr(response, 'registers', None) or ()
+        if len(registers) != 1:
+            raise self._failed(f'{method}({cmap.readback.address}) returned '
+                               f'{len(registers)} registers, not 1')
         variance = self.register_map.noise_std_pa ** 2 + cmap.scaling.resolution_pa ** 2 / 12.0
-        return cmap.scaling.to_pressure(response.registers[0]), variance
+        return cmap.scaling.to_pressure(registers[0]), variance
+
+    def readback_range(self, channel):
+        """Return the (low, high) pressures the readback register can represent [Pa gauge]."""
+        scaling = self.register_map.channels[check_channel(channel, self.n_channels)].scaling
+        return (scaling.to_pressure(scaling.min_counts & 0xFFFF),
+                scaling.to_pressure(scaling.max_counts & 0xFFFF))
 
     def status(self):
         """Return the connection state and the last error, without any traffic."""
@@ -336,8 +346,9 @@ class ModbusRegulator:
             raise BackendFault('Modbus regulator not connected: call connect() first')
         if not self._client.connected:
             now = self._clock()
+            # A clock that stepped back must not hold off reconnection until it catches up.
             if self._last_attempt is not None and \
-                    now - self._last_attempt < self._reconnect_interval:
+                    0.0 <= now - self._last_attempt < self._reconnect_interval:
                 raise BackendFault(self._fault or 'Modbus connection lost')
             self.connect()
         kwargs[self._device_kw] = self.register_map.device_id
