@@ -80,6 +80,7 @@ _NUMBER_LIKE = re.compile(
     r'[-+]?(?:0b[0-1_]+|0o?[0-7_]+|0x[0-9a-fA-F_]+|[0-9][0-9_]*(?::[0-5]?[0-9])+(?:\.[0-9_]*)?'
     r'|[0-9][0-9_]*(?:\.[0-9_]*)?(?:[eE][-+]?[0-9]+)?|\.[0-9][0-9_]*(?:[eE][-+]?[0-9]+)?)\Z')
 _IDENTIFIER = re.compile(r'[A-Za-z_][A-Za-z0-9_]*\Z')
+_BRIEF_CHARS = 100
 _BRIEF = reprlib.Repr()
 _BRIEF.maxlevel, _BRIEF.maxstring, _BRIEF.maxother = 2, 40, 40
 _BRIEF.maxlist = _BRIEF.maxtuple = _BRIEF.maxdict = _BRIEF.maxset = 4
@@ -94,7 +95,8 @@ def brief(value):
     """
     if isinstance(value, float):
         return repr(value)
-    return _BRIEF.repr(value)
+    text = _BRIEF.repr(value)
+    return text if len(text) <= _BRIEF_CHARS else f'{text[:60]}...{text[-30:]}'
 
 
 _TYPE_NAMES = {type(None): 'null', bool: 'boolean', str: 'string', list: 'list',
@@ -423,7 +425,8 @@ def parse_yaml(text, source='<string>', limits=DEFAULT_YAML_LIMITS):
         try:
             return loader.construct_document(node)
         except yaml.MarkedYAMLError as exc:
-            raise ConfigError(source, '', f'{_line(exc.problem_mark)}{exc.problem}') from None
+            raise ConfigError(source, '', f'{_line(exc.problem_mark)}malformed YAML: '
+                                          f'{exc.problem}') from None
     finally:
         if loader is not None:
             loader.dispose()

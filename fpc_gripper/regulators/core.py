@@ -163,13 +163,15 @@ class RegulatorCore:
 
     Each step updates every channel's supervisor, writes its setpoint, reads the
     pressure and checks it: a readback that is not finite, below vacuum or outside
-    the sensor's range is not published and puts the channel in fault; a measurement
-    above ``max_pressure`` plus a margin vents it; a measurement that stays off the
-    setpoint longer than ``tracking_timeout_s`` puts it in fault. A backend fault puts
-    every channel in fault. In fault a channel goes to its safe state (``vent``
-    always for over-pressure) and reports ERROR; once the cause clears it reports WARN
-    until a fresh command. Time is passed in (``now`` [s]); a clock that jumps back
-    counts as standing still.
+    the sensor's range is not published and puts the channel in fault until a good
+    readback; a measurement above ``max_pressure`` plus a margin vents it, and one that
+    stays off the setpoint longer than ``tracking_timeout_s`` puts it in its safe state,
+    both latched until `start` (reactivation): a leak or a stuck sensor does not heal
+    itself. A backend fault puts every channel in fault until the backend answers
+    again. In fault a channel goes to its safe state (``vent`` always for
+    over-pressure) and reports ERROR; once the cause clears it reports WARN until a
+    fresh command. Time is passed in (``now`` [s]); a clock that jumps back counts as
+    standing still.
 
     Parameters
     ----------
@@ -215,8 +217,9 @@ class RegulatorCore:
         return self._channels[index].supervisor.command(pressure_pa_gauge, now)
 
     def start(self, now):
-        """Leave the stopped state (lifecycle activation)."""
+        """Leave the stopped state (lifecycle activation); acknowledge latched faults."""
         for channel in self._channels:
+            channel.overpressure = channel.tracking_fault = channel.off_since = None
             channel.supervisor.start(now)
 
     def stop(self, now):
@@ -258,6 +261,7 @@ class RegulatorCore:
                 value, variance = self.backend.read_pressure(i)
             except BackendFault as exc:
                 backend_fault = backend_fault or str(exc)
+                channel.off_since = None
                 continue
             if self._accept(i, channel, value, variance, setpoint, mono):
                 samples.append(Sample(i, float(value), float(variance)))
@@ -282,22 +286,20 @@ class RegulatorCore:
             return False
         channel.measured = value = float(value)
         limit = channel.supervisor.max_pressure + self.monitor.overpressure_margin_pa
-        channel.overpressure = (f'over-pressure: measured {value:.0f} Pa > max_pressure + '
-                                f'margin = {limit:.0f} Pa, venting'
-                                if value > limit else None)
+        if value > limit and channel.overpressure is None:
+            channel.overpressure = (f'over-pressure: measured {value:.0f} Pa > max_pressure + '
+                                    f'margin = {limit:.0f} Pa; vented until reactivated')
         timeout = self.monitor.tracking_timeout_s
         if abs(value - setpoint) <= self.monitor.tracking_tolerance_pa or timeout <= 0.0:
             channel.off_since = None
-            channel.tracking_fault = None
-        else:
-            if channel.off_since is None:
-                channel.off_since = mono
-            if mono - channel.off_since > timeout:
-                channel.tracking_fault = (
-                    f'measured {value:.0f} Pa has been more than '
-                    f'{self.monitor.tracking_tolerance_pa:.0f} Pa off the setpoint '
-                    f'{setpoint:.0f} Pa for {mono - channel.off_since:.2f} s > {timeout:g} s '
-                    '(leak, blocked valve or stuck sensor)')
+        elif channel.off_since is None:
+            channel.off_since = mono
+        elif mono - channel.off_since > timeout and channel.tracking_fault is None:
+            channel.tracking_fault = (
+                f'measured {value:.0f} Pa stayed more than '
+                f'{self.monitor.tracking_tolerance_pa:.0f} Pa off the setpoint {setpoint:.0f} Pa '
+                f'for {mono - channel.off_since:.2f} s > {timeout:g} s (leak, blocked valve or '
+                'stuck sensor); safe state until reactivated')
         return True
 
     def _reconnect(self, status, mono):
@@ -331,7 +333,7 @@ class RegulatorCore:
                               (Level.OK, f'channel {i}: fault cleared; safe state until the '
                                          'next command'))
                 channel.own_fault = own
-            fault = backend_fault or own
+            fault = f'backend: {backend_fault}' if backend_fault is not None else own
             if fault is not None:
                 channel.supervisor.report_fault(fault, now, vent=channel.overpressure is not None)
             elif channel.supervisor.fault is not None:

@@ -350,8 +350,8 @@ class ChannelSupervisor:
                     f'{self._timeout:.3f} s; {safe}')
         if self._mode == SupervisorMode.FAULT:
             if self._fault is not None:
-                return f'backend fault: {self._fault}; {safe}'
-            return f'backend fault cleared, waiting for a fresh command; {safe}'
+                return f'fault: {self._fault}; {safe}'
+            return f'fault cleared, waiting for a fresh command; {safe}'
         return f'stopped; {safe}'
 
 

@@ -214,7 +214,7 @@ def test_backend_fault_gives_error_diagnostics_and_the_safe_state(rig):
     r.spin_until(lambda: all(r.last_status(n).level == DiagnosticStatus.ERROR for n in FINGERS))
     for name in FINGERS:
         status = r.last_status(name)
-        assert 'backend fault' in status.message and values(status)['mode'] == 'fault'
+        assert 'fault: backend' in status.message and values(status)['mode'] == 'fault'
         assert float(values(status)['setpoint_pa_gauge']) == 0.0    # vented to 0.0: exact
     assert all(sup.mode in SAFE_MODES for sup in r.bridge.supervisors)
     sim.clear_faults()
