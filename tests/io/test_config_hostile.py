@@ -3,10 +3,10 @@ Every config loader against hostile files: a valid result or one clear line, not
 
 "Clear" means: a `ConfigError` (a ValueError) whose message is one line that starts with
 the file's path, is at most 300 characters longer than it, and, where one key is at fault,
-names its key path. Two explicit corpora (the actuator design and the gripper config, each case with
-the words its message must hold) and hypothesis properties over generated files (fixed
-seeds, no example database, so every run tries the same files) for the design, gripper,
-Modbus register map and bare YAML loaders.
+names its key path. Two explicit corpora (the actuator design and the gripper config, each
+case with the words its message must hold) and hypothesis properties over generated files
+(fixed seeds, no example database, so every run tries the same files) for the design,
+gripper, Modbus register map and bare YAML loaders.
 """
 
 import math
