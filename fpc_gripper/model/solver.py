@@ -419,7 +419,7 @@ class CCMSolver:
         ValueError, TypeError
             On non-finite or negative pressure, malformed loads or initial state, and on
             loads outside the model's envelope (`validation.ENVELOPE`: gauge pressure up
-            to twice `design.max_pressure`, tip and point loads up to 10 N each).
+            to twice `design.max_pressure`, tip and point loads up to 5 N each).
 
         Notes
         -----

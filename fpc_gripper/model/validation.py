@@ -97,7 +97,7 @@ def _brief(value):
 # -- the model's validity envelope -----------------------------------------------------------
 
 # The envelope's bounds, (value, unit): no InputLimits may be wider.
-_WIDEST = {'max_tip_force': (10.0, '[N]'), 'pressure_factor': (2.0, '[-]')}
+_WIDEST = {'max_tip_force': (5.0, '[N]'), 'pressure_factor': (2.0, '[-]')}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -168,11 +168,13 @@ def check_load(pressure, tip_force, max_pressure, limits=ENVELOPE):
 
     """
     pressure = real_number('pressure', pressure, '[Pa]')
+    if pressure < 0.0:
+        raise ArgumentError('pressure', f'must be >= 0 (gauge) [Pa], got {pressure!r}')
     top = limits.pressure_factor * max_pressure
-    if not 0.0 <= pressure <= top:
-        raise ArgumentError('pressure', f'must be in [0, {top:.6g}] (gauge) [Pa], '
+    if pressure > top:
+        raise ArgumentError('pressure', f'must be <= {top:.6g} (gauge) [Pa], '
                                         f'{limits.pressure_factor:g} x max_pressure of the '
-                                        f'design, got {pressure!r}')
+                                        f'design (the envelope of the model), got {pressure!r}')
     force = real_pair('tip_force', tip_force, '[N]')
     check_force('tip_force', force, limits)
     return pressure, force

@@ -27,9 +27,9 @@ def solvers():
     (1e5, (1.7e308, 1.7e308), ('`tip_force` magnitude', 'got inf N')),
     (1e5, (-1000.0, 0.0), ('`tip_force` magnitude must be <= 5 [N]', 'got 1000 N')),
     (1e5, (-3.6, 3.6), ('`tip_force` magnitude', 'got 5.09117 N')),
-    (1e30, (0.0, 0.0), ('`pressure` must be in [0, 800000] (gauge) [Pa]', 'got 1e+30')),
-    (800001.0, (0.0, 0.0), ('`pressure` must be in [0, 800000]',)),
-    (-1.0, (0.0, 0.0), ('`pressure` must be in [0, 800000]', 'got -1.0')),
+    (1e30, (0.0, 0.0), ('`pressure` must be <= 800000 (gauge) [Pa]', 'got 1e+30')),
+    (800001.0, (0.0, 0.0), ('`pressure` must be <= 800000 (gauge) [Pa]', '2 x max_pressure')),
+    (-1.0, (0.0, 0.0), ('`pressure` must be >= 0 (gauge) [Pa], got -1.0',)),
 ])
 def test_every_solver_refuses_loads_outside_the_envelope(solvers, pressure, force, words):
     calls = {name: (lambda s=s: s.solve(pressure, force)) for name, s in solvers.items()}
@@ -52,7 +52,7 @@ def test_the_envelope_edge_is_accepted_and_limits_only_tighten():
     tight = InputLimits(max_tip_force=1.0, pressure_factor=1.0)
     with pytest.raises(ArgumentError, match='magnitude must be <= 1 '):
         check_load(1e5, (0.0, 1.5), PAPER.max_pressure, tight)
-    with pytest.raises(ArgumentError, match=r'must be in \[0, 400000\]'):
+    with pytest.raises(ArgumentError, match=r'must be <= 400000 \(gauge\)'):
         check_load(400001.0, (0.0, 0.0), PAPER.max_pressure, tight)
     for wide in ({'max_tip_force': 5.5}, {'pressure_factor': 3.0}, {'max_tip_force': 0.0}):
         with pytest.raises(ArgumentError, match='envelope of the model'):

@@ -15,7 +15,9 @@ def curvature(design, n=8, pressure=0.0):
 
 def flattening_pressure(design):
     solver = CCMSolver(design, 8)
-    return brentq(lambda p: solver.solve(p).curvature, 0.0, 1.5e6, xtol=10.0)
+    # Every finger here is flat below 450 kPa and curls back by 800 kPa, the top of the
+    # model's envelope (twice the 400 kPa rating).
+    return brentq(lambda p: solver.solve(p).curvature, 0.0, 8e5, xtol=10.0)
 
 
 def test_srm_matches_ccm_at_low_prestrain_only():
