@@ -12,6 +12,7 @@ gripper, Modbus register map and bare YAML loaders.
 import math
 import pathlib
 
+from hypothesis import event
 from hypothesis import given
 from hypothesis import HealthCheck
 from hypothesis import seed
@@ -331,9 +332,12 @@ def _try(tmp_path, content, loader):
     else:
         path.write_text(content, errors='surrogateescape')
     try:
-        return loader(path)
+        result = loader(path)
+        event('loaded')
+        return result
     except ValueError as exc:
         assert isinstance(exc, ConfigError), repr(exc)
+        event('refused')
         message = str(exc)
         assert '\n' not in message and len(message) <= len(str(path)) + MAX_MESSAGE, message
         assert message.startswith(str(path)) or message.startswith(str(ROOT)), message
