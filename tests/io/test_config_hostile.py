@@ -144,14 +144,22 @@ ACTUATOR_CASES = [
 ]
 
 
-@pytest.mark.parametrize('case, content, words', [(c[0], c[1], c[2:]) for c in ACTUATOR_CASES],
-                         ids=[c[0] for c in ACTUATOR_CASES])
-def test_hostile_actuator_files_give_one_clear_line(tmp_path, case, content, words):
-    path = tmp_path / 'actuator.yaml'
+def _write(path, content):
     if isinstance(content, bytes):
         path.write_bytes(content)
     else:
-        path.write_text(content)
+        path.write_text(content, errors='surrogateescape')
+    return path
+
+
+def _cases(cases):
+    return pytest.mark.parametrize('content, words', [(c[1], c[2:]) for c in cases],
+                                   ids=[c[0] for c in cases])
+
+
+@_cases(ACTUATOR_CASES)
+def test_hostile_actuator_files_give_one_clear_line(tmp_path, content, words):
+    path = _write(tmp_path / 'actuator.yaml', content)
     with pytest.raises(ValueError) as error:
         ActuatorDesign.from_yaml(path)
     assert_clear(error, path, *words)
@@ -258,14 +266,9 @@ GRIPPER_CASES = [
 ]
 
 
-@pytest.mark.parametrize('case, content, words', [(c[0], c[1], c[2:]) for c in GRIPPER_CASES],
-                         ids=[c[0] for c in GRIPPER_CASES])
-def test_hostile_gripper_files_give_one_clear_line(tmp_path, case, content, words):
-    path = tmp_path / 'gripper.yaml'
-    if isinstance(content, bytes):
-        path.write_bytes(content)
-    else:
-        path.write_text(content)
+@_cases(GRIPPER_CASES)
+def test_hostile_gripper_files_give_one_clear_line(tmp_path, content, words):
+    path = _write(tmp_path / 'gripper.yaml', content)
     with pytest.raises(ValueError) as error:
         load_gripper_config(path)
     assert_clear(error, path, *words)
@@ -326,11 +329,7 @@ def _documents(shipped):
 
 
 def _try(tmp_path, content, loader):
-    path = tmp_path / 'generated.yaml'
-    if isinstance(content, bytes):
-        path.write_bytes(content)
-    else:
-        path.write_text(content, errors='surrogateescape')
+    path = _write(tmp_path / 'generated.yaml', content)
     try:
         result = loader(path)
         event('loaded')

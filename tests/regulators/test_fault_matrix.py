@@ -78,23 +78,41 @@ def _device(clock):
     return device
 
 
-class SimRig:
+class Rig:
+    """What both rigs share: the simulated device on a hand-driven clock and its faults."""
+
+    def __init__(self):
+        self.clock = FakeClock()
+        self.device = _device(self.clock)
+
+    def inject_device(self, fault):
+        """Inject a fault of the device itself; return whether `fault` was one."""
+        if fault == 'leak':
+            self.device.inject_fault('leak', 0, rate=3.0e6)
+        elif fault == 'stuck_sensor':
+            self.device.inject_fault('stuck_sensor', 0)
+        else:
+            return False
+        return True
+
+    def device_setpoint(self, channel):
+        return self.device.setpoint(channel)
+
+
+class SimRig(Rig):
     """The core on the simulated regulator."""
 
     name = 'sim'
 
     def __init__(self):
-        self.clock = FakeClock()
-        self.device = _device(self.clock)
+        super().__init__()
         self.backend = Recorder(self.device)
         self.backend.connect()
 
     def inject(self, fault):
-        if fault == 'leak':
-            self.device.inject_fault('leak', 0, rate=3.0e6)
-        elif fault == 'stuck_sensor':
-            self.device.inject_fault('stuck_sensor', 0)
-        elif fault in ('over_range', 'nan'):
+        if self.inject_device(fault):
+            return
+        if fault in ('over_range', 'nan'):
             self.device.inject_fault('bad_readback', 0,
                                      value=5.0e6 if fault == 'over_range' else math.nan)
         elif fault == 'disconnect':
@@ -106,21 +124,17 @@ class SimRig:
         self.device.clear_faults()
         self.backend.fail_writes = False
 
-    def device_setpoint(self, channel):
-        return self.device.setpoint(channel)
-
     def close(self):
         self.backend.close()
 
 
-class ModbusRig:
+class ModbusRig(Rig):
     """The core on the Modbus backend; the device behind a pymodbus server on loopback."""
 
     name = 'modbus'
 
     def __init__(self):
-        self.clock = FakeClock()
-        self.device = _device(self.clock)
+        super().__init__()
         self.override = [None, None]
         self.fail_writes = False
         self.stopped = False
@@ -156,11 +170,9 @@ class ModbusRig:
         return None
 
     def inject(self, fault):
-        if fault == 'leak':
-            self.device.inject_fault('leak', 0, rate=3.0e6)
-        elif fault == 'stuck_sensor':
-            self.device.inject_fault('stuck_sensor', 0)
-        elif fault in ('over_range', 'under_range'):
+        if self.inject_device(fault):
+            return
+        if fault in ('over_range', 'under_range'):
             self.override[0] = 0xFFFF if fault == 'over_range' else 0
         elif fault == 'disconnect':
             self.server.stop()
@@ -175,9 +187,6 @@ class ModbusRig:
         if self.stopped:
             self.server.start()
             self.stopped = False
-
-    def device_setpoint(self, channel):
-        return self.device.setpoint(channel)
 
     def close(self):
         self.backend.close()
