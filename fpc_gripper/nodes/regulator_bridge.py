@@ -260,9 +260,8 @@ class RegulatorBridge(LifecycleNode):
 
     def on_activate(self, state):
         """Start the control timer."""
-        now = self._latch()
-        for supervisor in self._supervisors:
-            supervisor.start(now)
+        # Activation acknowledges the latched faults (over-pressure, tracking).
+        self._core.start(self._latch())
         self._active = True
         self._last_diag_time = None
         self._start_timer()
@@ -276,8 +275,7 @@ class RegulatorBridge(LifecycleNode):
         self._stop_timer()
         self._active = False
         now = self._latch()
-        for supervisor in self._supervisors:
-            supervisor.stop(now)
+        self._core.stop(now)
         self._control_step(now, force_diagnostics=True)
         return super().on_deactivate(state)
 
@@ -331,8 +329,8 @@ class RegulatorBridge(LifecycleNode):
         names = {p.name for p in parameters}
         if names & {'max_pressure', 'rate_limit_pa_s', 'command_timeout_s', 'safe_state'}:
             limits = self._limits()
-            for supervisor in self._supervisors:
-                supervisor.configure(**limits)
+            if self._core is not None:
+                self._core.configure(**limits)
             self.get_logger().info(
                 f'limits now max_pressure {limits["max_pressure"]:.0f} Pa gauge, '
                 f'rate_limit {limits["rate_limit_pa_s"]:.0f} Pa/s, command_timeout '
