@@ -251,6 +251,9 @@ class RegulatorCore:
         backend_fault, samples = None, []
         for i, channel in enumerate(self._channels):
             setpoint = channel.supervisor.update(now).setpoint
+            # What the regulator has been driving towards since the last step: the reading
+            # answers that, not the setpoint written now.
+            held = channel.written
             try:
                 self.backend.set_pressure(i, setpoint)
                 channel.written = setpoint
@@ -263,7 +266,7 @@ class RegulatorCore:
                 backend_fault = backend_fault or str(exc)
                 channel.off_since = None
                 continue
-            if self._accept(i, channel, value, variance, setpoint, mono):
+            if self._accept(i, channel, value, variance, held, mono):
                 samples.append(Sample(i, float(value), float(variance)))
         status = self.backend.status()
         if backend_fault is None and not status.ok:
@@ -276,8 +279,12 @@ class RegulatorCore:
 
     # -- internals ---------------------------------------------------------------------------
 
-    def _accept(self, index, channel, value, variance, setpoint, mono):
-        """Check a readback; update the channel's monitors; return whether it is published."""
+    def _accept(self, index, channel, value, variance, held, mono):
+        """
+        Check a readback; update the channel's monitors; return whether it is published.
+
+        `held` is the setpoint the regulator had until this step (None if unknown).
+        """
         low, high = self._ranges[index]
         reason = check_readback(value, variance, max(low, -self.monitor.atmospheric_pressure),
                                 high)
@@ -290,14 +297,15 @@ class RegulatorCore:
             channel.overpressure = (f'over-pressure: measured {value:.0f} Pa > max_pressure + '
                                     f'margin = {limit:.0f} Pa; vented until reactivated')
         timeout = self.monitor.tracking_timeout_s
-        if abs(value - setpoint) <= self.monitor.tracking_tolerance_pa or timeout <= 0.0:
+        if held is None or abs(value - held) <= self.monitor.tracking_tolerance_pa \
+                or timeout <= 0.0:
             channel.off_since = None
         elif channel.off_since is None:
             channel.off_since = mono
         elif mono - channel.off_since > timeout and channel.tracking_fault is None:
             channel.tracking_fault = (
                 f'measured {value:.0f} Pa stayed more than '
-                f'{self.monitor.tracking_tolerance_pa:.0f} Pa off the setpoint {setpoint:.0f} Pa '
+                f'{self.monitor.tracking_tolerance_pa:.0f} Pa off the setpoint {held:.0f} Pa '
                 f'for {mono - channel.off_since:.2f} s > {timeout:g} s (leak, blocked valve or '
                 'stuck sensor); safe state until reactivated')
         return True
