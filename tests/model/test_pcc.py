@@ -244,7 +244,7 @@ def test_rigidity_matches_the_rod():
 # -- API, warm start ---------------------------------------------------------------------
 @pytest.mark.parametrize('force', [(0.0, 0.0), (0.5, -0.8)])
 def test_warm_start_gives_the_cold_answer(force):
-    # Up to UNIQUE_LOAD (1 N): above it a warm start is ignored (test_envelope.py).
+    # Up to UNIQUE_LOAD (1.5 N): above it a warm start is ignored (test_envelope.py).
     solver = PCCSolver(ActuatorDesign.paper(0.40), n_segments=64)
     start = solver.solve(100e3, force)
     warm = solver.solve(101e3, force, initial=start)
