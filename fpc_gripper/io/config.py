@@ -2,18 +2,32 @@
 
 from dataclasses import dataclass
 import math
+import os
 import pathlib
 import re
 
 from fpc_gripper.model import ActuatorDesign
-from fpc_gripper.model.design import safe_load_yaml
+from fpc_gripper.model.validation import DESIGN_BOUNDS
+from fpc_gripper.safe_yaml import load_yaml
+from fpc_gripper.safe_yaml import Where
 
 __all__ = ['FingerConfig', 'GripperConfig', 'load_gripper_config',
-           'default_gripper_config_path', 'config_dir']
+           'default_gripper_config_path', 'config_dir', 'MAX_FINGERS', 'MAX_NAME_CHARS']
 
-_NAME = re.compile(r'^[A-Za-z][A-Za-z0-9_]*$')
+#: Most fingers a gripper config may have.
+MAX_FINGERS = 16
+#: Longest finger name: it becomes a topic prefix and a TF frame, and the full topic name
+#: (namespace, finger, 'pressure_command') must stay within ROS's 247 characters.
+MAX_NAME_CHARS = 64
+#: A ROS name token (rcl's topic-name rule for one token, which TF frames satisfy too).
+_NAME = re.compile(r'[A-Za-z][A-Za-z0-9_]*\Z')
 _TOP_KEYS = {'actuator', 'palm_radius', 'atmospheric_pressure', 'max_pressure', 'fingers'}
 _FINGER_KEYS = {'name', 'mount_angle', 'design'}
+#: Atmospheric pressure anywhere people work, from 9 km up to below sea level [Pa]: the
+#: range of the nodes' `atmospheric_pressure` parameter.
+ATMOSPHERIC_RANGE = (3.0e4, 1.2e5)
+#: Largest palm radius [m].
+MAX_PALM_RADIUS = 1.0
 
 
 @dataclass(frozen=True)
@@ -86,16 +100,6 @@ def default_gripper_config_path():
     return config_dir() / 'gripper_paper.yaml'
 
 
-def _number(source, name, value, unit, positive=True):
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ValueError(f'{source}: `{name}` must be a number {unit}, got {value!r}')
-    value = float(value)
-    if not math.isfinite(value) or (positive and value <= 0.0):
-        raise ValueError(f'{source}: `{name}` must be finite{" and > 0" if positive else ""} '
-                         f'{unit}, got {value}')
-    return value
-
-
 def load_gripper_config(path=None):
     """
     Load and validate a gripper configuration.
@@ -103,7 +107,10 @@ def load_gripper_config(path=None):
     Parameters
     ----------
     path : str or path-like, optional
-        YAML file; default `default_gripper_config_path()`.
+        YAML file; default `default_gripper_config_path()`. It is read with
+        `fpc_gripper.safe_yaml.load_yaml` (size, depth and alias limits, no duplicate
+        keys, decimal numbers only). `actuator` may name another YAML file, relative to
+        this one, read the same way.
 
     Returns
     -------
@@ -112,62 +119,52 @@ def load_gripper_config(path=None):
     Raises
     ------
     ValueError
-        On malformed YAML, unknown keys, bad values or invalid designs, naming the
-        file and the key.
+        A `safe_yaml.ConfigError`, one line naming the file, the key path and the
+        problem with its value and unit, e.g. ``g.yaml: fingers[1].design.Lx: must be
+        > 0 [m], got -0.11``. Nothing else escapes, whatever the file holds.
 
     """
-    import yaml
     path = pathlib.Path(path) if path is not None else default_gripper_config_path()
-    source = str(path)
-    try:
-        data = safe_load_yaml(path.read_text())
-    except OSError as exc:
-        raise ValueError(f'{source}: cannot read gripper config: {exc}') from exc
-    except yaml.YAMLError as exc:
-        raise ValueError(f'{source}: malformed YAML: {exc}') from exc
-    if not isinstance(data, dict):
-        raise ValueError(f'{source}: expected a mapping at top level')
-    unknown = sorted(set(map(str, data)) - _TOP_KEYS)
-    if unknown:
-        raise ValueError(f'{source}: unknown key(s): {", ".join(unknown)}')
+    source = os.fspath(path)
+    where = Where(source)
+    data = where.mapping(load_yaml(path, what='gripper config'), _TOP_KEYS,
+                         what='a mapping of gripper config keys (fingers, actuator, ...)')
     actuator = data.get('actuator')
     if actuator is None:
         base = ActuatorDesign.paper().to_dict()
     elif isinstance(actuator, str):
-        actuator_path = (path.parent / actuator)
-        base = ActuatorDesign.from_yaml(actuator_path).to_dict()
+        name = (where / 'actuator').string(actuator, 4096, what='a file name')
+        base = ActuatorDesign.from_yaml(path.parent / name).to_dict()
     elif isinstance(actuator, dict):
-        base = ActuatorDesign.from_dict(actuator, source=f'{source}: actuator').to_dict()
+        base = ActuatorDesign.from_dict(actuator, source, 'actuator').to_dict()
     else:
-        raise ValueError(f'{source}: `actuator` must be a file name or a mapping')
-    fingers = data.get('fingers')
-    if not isinstance(fingers, list) or not fingers:
-        raise ValueError(f'{source}: `fingers` must be a non-empty list')
-    out = []
+        raise (where / 'actuator').error('must be a file name or a mapping of ActuatorDesign '
+                                         f'fields, got {type(actuator).__name__}')
+    fingers = (where / 'fingers').sequence(data.get('fingers'), 1, MAX_FINGERS,
+                                           what='finger mappings')
+    out, first = [], {}
     for i, item in enumerate(fingers):
-        where = f'{source}: fingers[{i}]'
-        if not isinstance(item, dict):
-            raise ValueError(f'{where} must be a mapping')
-        bad = sorted(set(map(str, item)) - _FINGER_KEYS)
-        if bad:
-            raise ValueError(f'{where}: unknown key(s): {", ".join(bad)}')
-        name = item.get('name', f'finger_{i}')
-        if not isinstance(name, str) or not _NAME.match(name):
-            raise ValueError(f'{where}: `name` must be a valid ROS name token, got {name!r}')
-        overrides = item.get('design') or {}
-        if not isinstance(overrides, dict):
-            raise ValueError(f'{where}: `design` must be a mapping of ActuatorDesign fields')
-        design = ActuatorDesign.from_dict({**base, **overrides}, source=f'{where}: design')
-        angle = _number(where, 'mount_angle', item.get('mount_angle', 0.0), '[rad]',
-                        positive=False)
+        at = where / 'fingers' / i
+        item = at.mapping(item, _FINGER_KEYS)
+        name = (at / 'name').string(
+            item.get('name', f'finger_{i}'), MAX_NAME_CHARS, _NAME,
+            what='a valid ROS name token (a letter, then letters, digits or _)')
+        if name in first:
+            raise (at / 'name').error(f'finger names must be unique: {name!r} is also '
+                                      f'fingers[{first[name]}].name')
+        first[name] = i
+        overrides = item.get('design')
+        overrides = {} if overrides is None else (at / 'design').mapping(overrides)
+        design = ActuatorDesign.from_dict({**base, **overrides}, source, (at / 'design').path)
+        angle = (at / 'mount_angle').number(item.get('mount_angle', 0.0), '[rad]',
+                                            -2.0 * math.pi, 2.0 * math.pi)
         out.append(FingerConfig(name=name, design=design, mount_angle=angle))
-    names = [f.name for f in out]
-    if len(set(names)) != len(names):
-        raise ValueError(f'{source}: finger names must be unique, got {names}')
     return GripperConfig(
         fingers=tuple(out),
-        palm_radius=_number(source, 'palm_radius', data.get('palm_radius', 0.035), '[m]'),
-        max_pressure=_number(source, 'max_pressure', data.get('max_pressure', 400e3), '[Pa]'),
-        atmospheric_pressure=_number(source, 'atmospheric_pressure',
-                                     data.get('atmospheric_pressure', 101325.0), '[Pa]'),
+        palm_radius=(where / 'palm_radius').number(
+            data.get('palm_radius', 0.035), '[m]', 0.0, MAX_PALM_RADIUS, low_open=True),
+        max_pressure=(where / 'max_pressure').number(
+            data.get('max_pressure', 400e3), '[Pa]', *DESIGN_BOUNDS.max_pressure),
+        atmospheric_pressure=(where / 'atmospheric_pressure').number(
+            data.get('atmospheric_pressure', 101325.0), '[Pa]', *ATMOSPHERIC_RANGE),
         source=source)

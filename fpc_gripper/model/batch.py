@@ -8,6 +8,7 @@ from .design import ActuatorDesign
 from .pipeline import finger_model, model_label, ModelSettings, rung_label, solver_label
 from .selection import AdaptiveSolver
 from .solver import AXES, CCMResult, CCMSolver, check_rigidity, rigidity_result, SolverStatus
+from .validation import check_load
 
 __all__ = ['solve_grid', 'rigidity_grid', 'GridResult', 'RigidityGrid']
 
@@ -47,6 +48,14 @@ def _tip_forces(tip_forces):
         raise ValueError(f'`tip_forces` must be finite [N], got {values[bad][0].tolist()} at '
                          f'index {int(np.argmax(bad))}')
     return values
+
+
+def _in_envelope(designs, pressures, forces):
+    """Refuse a grid with a scene outside the envelope, as each single solve would."""
+    worst = forces[int(np.argmax(np.hypot(forces[:, 0], forces[:, 1])))]
+    for design in designs:
+        check_load(float(pressures.max()), (float(worst[0]), float(worst[1])),
+                   design.max_pressure)
 
 
 def _settings(settings):
@@ -232,6 +241,7 @@ def solve_grid(designs, pressures, tip_forces=((0.0, 0.0),), settings=ModelSetti
     designs = _designs(designs)
     pressures = _pressures(pressures)
     forces = _tip_forces(tip_forces)
+    _in_envelope(designs, pressures, forces)
     settings = _settings(settings)
     out = GridResult(designs, pressures, forces, settings)
     n_p, n_f = pressures.size, forces.shape[0]
@@ -383,6 +393,7 @@ def rigidity_grid(designs, pressures, axis='x', displacement=0.010, settings=Mod
     """
     designs = _designs(designs)
     pressures = _pressures(pressures)
+    _in_envelope(designs, pressures, np.zeros((1, 2)))
     delta = check_rigidity(axis, displacement)
     settings = _settings(settings)
     out = RigidityGrid(designs, pressures, axis, delta)

@@ -3,14 +3,15 @@
 import dataclasses
 from dataclasses import dataclass, field
 import math
+import os
 import pathlib
 
 import numpy as np
 
 from .materials import check_emc_monotonic, default_emc_coefficients, Material
-from .validation import real_number
+from .validation import _brief, ArgumentError, check_interval, DESIGN_BOUNDS, real_number
 
-__all__ = ['ActuatorDesign', 'PAPER_MATERIALS', 'safe_load_yaml']
+__all__ = ['ActuatorDesign', 'PAPER_MATERIALS']
 
 #: Table III laminae: constraining layer, fluidic layer, regular (and prestressed) EMC.
 PAPER_MATERIALS = {
@@ -23,31 +24,7 @@ _LENGTHS = ('Lx', 'Ly', 'Lc', 'Cx', 'Cy', 'H', 'h1', 'h2', 'h3', 'h3a', 'h3b', '
 _MATERIAL_FIELDS = ('constraining_layer', 'fluidic_layer', 'emc')
 #: Strain headroom above the prestrain on which the PEMC law must be monotonic [-].
 _MONOTONIC_MARGIN = 0.2
-
-
-def safe_load_yaml(text):
-    """
-    Parse YAML safely, reading 1e6-style numbers as floats (YAML 1.2) as users expect.
-
-    PyYAML follows YAML 1.1, where ``263e6`` (no dot, no exponent sign) is a string.
-    """
-    import re
-
-    import yaml
-
-    class _Loader(yaml.SafeLoader):
-        pass
-
-    _Loader.add_implicit_resolver(
-        'tag:yaml.org,2002:float',
-        re.compile(r'^[-+]?(?:[0-9][0-9_]*(?:\.[0-9_]*)?|\.[0-9_]+)(?:[eE][-+]?[0-9]+)?$'
-                   r'|^[-+]?\.(?:inf|Inf|INF)$|^\.(?:nan|NaN|NAN)$'),
-        list('-+0123456789.'))
-    # Integers keep their own resolver, registered first for the same characters.
-    _Loader.yaml_implicit_resolvers = {
-        key: sorted(value, key=lambda item: item[0] != 'tag:yaml.org,2002:int')
-        for key, value in _Loader.yaml_implicit_resolvers.items()}
-    return yaml.load(text, Loader=_Loader)
+_UNITS = {**{name: '[m]' for name in _LENGTHS}, 'prestrain': '[-]', 'max_pressure': '[Pa]'}
 
 
 @dataclass(frozen=True)
@@ -124,14 +101,14 @@ class ActuatorDesign:
                            real_number('max_pressure', self.max_pressure, '[Pa]'))
         object.__setattr__(self, 'pressure_work_factor',
                            real_number('pressure_work_factor', self.pressure_work_factor, '[-]'))
-        coefficients = tuple(self.emc_coefficients) if np.ndim(self.emc_coefficients) else ()
-        if len(coefficients) != 4:
-            raise ValueError('`emc_coefficients` must be 4 numbers (a1, a2, a3, a4) [Pa], '
-                             f'got {self.emc_coefficients!r}')
+        coefficients = self.emc_coefficients
+        if not isinstance(coefficients, (tuple, list, np.ndarray)) or len(coefficients) != 4:
+            raise ArgumentError('emc_coefficients', 'must be 4 numbers (a1, a2, a3, a4) [Pa], '
+                                                    f'got {_brief(coefficients)}')
         object.__setattr__(self, 'emc_coefficients', tuple(
             real_number(f'emc_coefficients[{i}]', c, '[Pa]') for i, c in enumerate(coefficients)))
         if not isinstance(self.ribs, (bool, np.bool_)):
-            raise TypeError(f'`ribs` must be a bool, got {self.ribs!r}')
+            raise TypeError(f'`ribs` must be a bool, got {_brief(self.ribs)}')
         object.__setattr__(self, 'ribs', bool(self.ribs))
         for name in _MATERIAL_FIELDS:
             value = getattr(self, name)
@@ -139,43 +116,88 @@ class ActuatorDesign:
                 value = Material(**value)
             if not isinstance(value, Material):
                 raise TypeError(f'`{name}` must be a Material or a mapping of E1, E2, nu, '
-                                f'got {value!r}')
+                                f'got {_brief(value)}')
             object.__setattr__(self, name, value)
         self._validate()
 
     def _validate(self):
+        """
+        Raise an `ArgumentError` naming the field unless the design is buildable and plausible.
+
+        The bounds (`validation.DESIGN_BOUNDS`) are wide around any finger one could make,
+        and keep every solver finite and small: at most 200 ribs, layers and features of
+        10 um or more, moduli of 1 kPa to 1 TPa, a rating of at most 2 MPa.
+        """
+        bounds = DESIGN_BOUNDS
         for name in ('Lx', 'Ly', 'Cx', 'Cy', 'H', 'w1', 'w2', 't'):
             if getattr(self, name) <= 0.0:
-                raise ValueError(f'`{name}` must be > 0 [m], got {getattr(self, name)}')
+                raise ArgumentError(name, f'must be > 0 [m], got {getattr(self, name)!r}')
+        for name in ('Lx', 'Ly'):
+            check_interval(name, getattr(self, name), bounds.length, '[m]')
+        check_interval('H', self.H, bounds.height, '[m]')
         if not 0.0 <= self.Lc < self.Lx:
-            raise ValueError(f'`Lc` must be in [0, Lx) = [0, {self.Lx}) [m], got {self.Lc}')
+            raise ArgumentError('Lc', f'must be in [0, Lx) = [0, {self.Lx}) [m], got {self.Lc}')
+        if self.free_length < bounds.length[0]:
+            raise ArgumentError('Lc', f'leaves a free length Lx - Lc = {self.free_length:.6g} '
+                                      f'[m] shorter than {bounds.length[0]:g} m')
         if not self.Lc < self.Cx <= self.Lx:
-            raise ValueError(f'`Cx` must be in (Lc, Lx] = ({self.Lc}, {self.Lx}] [m], '
-                             f'got {self.Cx}')
+            raise ArgumentError('Cx', f'must be in (Lc, Lx] = ({self.Lc}, {self.Lx}] [m], '
+                                      f'got {self.Cx}')
         if not self.Cy < self.Ly:
-            raise ValueError(f'`Cy` must be < `Ly` = {self.Ly} [m], got {self.Cy}')
+            raise ArgumentError('Cy', f'must be < `Ly` = {self.Ly} [m], got {self.Cy}')
+        for name, size in (('Cy', self.Cy), ('Cx', self.Cx - self.Lc), ('w1', self.w1),
+                           ('w2', self.w2), ('t', self.t)):
+            if size < bounds.feature:
+                raise ArgumentError(name, f'gives a feature of {size:.6g} [m], smaller than '
+                                          f'{bounds.feature:g} m')
         order = (self.H / 2, self.h1, self.h2, -self.h3, -self.H / 2)
         names = ('H/2', 'h1', 'h2', '-h3', '-H/2')
-        for upper, lower, nu, nl in zip(order, order[1:], names, names[1:]):
-            if not upper > lower:
-                raise ValueError(f'layers must satisfy H/2 > h1 > h2 > -h3 > -H/2 [m]; '
-                                 f'got {nu} = {upper} <= {nl} = {lower}')
+        blame = ('h1', 'h2', 'h3', 'h3')
+        for upper, lower, nu, nl, field_name in zip(order, order[1:], names, names[1:], blame):
+            if not upper - lower >= bounds.feature:
+                raise ArgumentError(field_name, f'breaks the layers: H/2 > h1 > h2 > -h3 > -H/2 '
+                                                f'[m], each layer at least '
+                                                f'{bounds.feature:g} m thick; got {nu} = '
+                                                f'{upper} and {nl} = {lower}')
         if not -self.h3 <= -self.h3b < self.h3a <= self.h2:
-            raise ValueError('channel must lie inside the fluidic layer: '
-                             f'-h3 <= -h3b < h3a <= h2 [m], got -h3 = {-self.h3}, '
-                             f'-h3b = {-self.h3b}, h3a = {self.h3a}, h2 = {self.h2}')
+            raise ArgumentError('h3a' if self.h3a > self.h2 else 'h3b',
+                                'channel must lie inside the fluidic layer: '
+                                f'-h3 <= -h3b < h3a <= h2 [m], got -h3 = {-self.h3}, '
+                                f'-h3b = {-self.h3b}, h3a = {self.h3a}, h2 = {self.h2}')
+        if self.h3a + self.h3b < bounds.feature:
+            raise ArgumentError('h3a', f'gives a channel height h3a + h3b = '
+                                       f'{self.h3a + self.h3b:.6g} [m], smaller than '
+                                       f'{bounds.feature:g} m')
         if self.ribs and 1.5 * self.t + self.w1 > self.Cy / 2:
-            raise ValueError(f'ribs do not fit the channel: 3t/2 + w1 = '
-                             f'{1.5 * self.t + self.w1:.6g} must be <= Cy/2 = '
-                             f'{self.Cy / 2:.6g} [m]; reduce `w1` or set ribs=False')
+            raise ArgumentError('w1', f'ribs do not fit the channel: 3t/2 + w1 = '
+                                      f'{1.5 * self.t + self.w1:.6g} must be <= Cy/2 = '
+                                      f'{self.Cy / 2:.6g} [m]; reduce `w1` or set ribs=False')
+        ribs = self._rib_count()
+        if ribs > bounds.max_ribs:
+            raise ArgumentError('w2', f'and t = {self.t:g} m give {ribs} ribs along the '
+                                      f'channel, more than {bounds.max_ribs}')
         if not 0.0 <= self.prestrain < 1.0:
-            raise ValueError(f'`prestrain` must be in [0, 1) [-], got {self.prestrain}')
+            raise ArgumentError('prestrain', f'must be in [0, 1) [-], got {self.prestrain}')
         if self.max_pressure <= 0.0:
-            raise ValueError(f'`max_pressure` must be > 0 [Pa], got {self.max_pressure}')
-        if self.pressure_work_factor <= 0.0:
-            raise ValueError('`pressure_work_factor` must be > 0 [-], got '
-                             f'{self.pressure_work_factor}')
-        check_emc_monotonic(self.emc_coefficients, self.prestrain + _MONOTONIC_MARGIN)
+            raise ArgumentError('max_pressure', f'must be > 0 [Pa], got {self.max_pressure}')
+        check_interval('max_pressure', self.max_pressure, bounds.max_pressure, '[Pa]')
+        check_interval('pressure_work_factor', self.pressure_work_factor,
+                       bounds.pressure_work_factor, '[-]')
+        for name in _MATERIAL_FIELDS:
+            material = getattr(self, name)
+            for key in ('E1', 'E2'):
+                check_interval(f'{name}.{key}', getattr(material, key), bounds.modulus, '[Pa]')
+            check_interval(f'{name}.nu', material.nu, (-bounds.poisson, bounds.poisson), '[-]')
+        for i, value in enumerate(self.emc_coefficients):
+            check_interval(f'emc_coefficients[{i}]', value,
+                           (-bounds.emc_coefficient, bounds.emc_coefficient), '[Pa]')
+        try:
+            check_emc_monotonic(self.emc_coefficients, self.prestrain + _MONOTONIC_MARGIN)
+        except ValueError as exc:
+            raise ArgumentError('emc_coefficients',
+                                str(exc).removeprefix('`emc_coefficients` ')) from None
+        check_interval('emc_coefficients[3]', self.emc_coefficients[3], bounds.modulus,
+                       '[Pa] (the PEMC modulus at zero strain)')
 
     # -- derived geometry -------------------------------------------------
     @property
@@ -198,15 +220,18 @@ class ActuatorDesign:
             [x_k, x_k + t] with x_k = w2 + k (t + w2) while x_k + t <= channel end [m].
 
         """
-        if not self.ribs:
-            return np.zeros((0, 2))
-        end = self.channel_end
-        # A relative slack keeps a rib that ends exactly at the channel end.
-        count = int(math.floor((end - self.w2 - self.t) / (self.t + self.w2) * (1 + 1e-12)
-                               + 1e-12)) + 1
-        count = max(count, 0)
+        count = self._rib_count()
         start = self.w2 + np.arange(count) * (self.t + self.w2)
         return np.stack([start, start + self.t], axis=1)
+
+    def _rib_count(self):
+        """Return the number of transverse ribs that fit the channel (0 without ribs)."""
+        if not self.ribs:
+            return 0
+        # A relative slack keeps a rib that ends exactly at the channel end.
+        count = math.floor((self.channel_end - self.w2 - self.t) / (self.t + self.w2)
+                           * (1 + 1e-12) + 1e-12) + 1
+        return max(int(count), 0)
 
     # -- construction --------------------------------------------------------
     @classmethod
@@ -234,38 +259,68 @@ class ActuatorDesign:
         return out
 
     @classmethod
-    def from_dict(cls, data, source='mapping'):
-        """Build a design from a mapping of fields; missing fields take the paper's values."""
-        if not isinstance(data, dict):
-            raise ValueError(f'{source}: expected a mapping of ActuatorDesign fields, '
-                             f'got {type(data).__name__}')
-        known = {f.name for f in dataclasses.fields(cls)}
-        unknown = sorted(set(map(str, data)) - known)
-        if unknown:
-            raise ValueError(f'{source}: unknown ActuatorDesign key(s): {", ".join(unknown)}')
-        kwargs = dict(data)
-        for name in _MATERIAL_FIELDS:
-            if name in kwargs and isinstance(kwargs[name], dict):
-                bad = sorted(set(kwargs[name]) - {'E1', 'E2', 'nu'})
-                if bad:
-                    raise ValueError(f'{source}: unknown key(s) in `{name}`: {", ".join(bad)}')
-                kwargs[name] = Material(**kwargs[name])
-        if 'emc_coefficients' in kwargs:
-            kwargs['emc_coefficients'] = tuple(kwargs['emc_coefficients'] or ())
-        return cls(**kwargs)
+    def from_dict(cls, data, source='mapping', path=''):
+        """
+        Build a design from a mapping of fields; missing fields take the paper's values.
+
+        Parameters
+        ----------
+        data : dict
+            Field names to plain values (numbers, lists, bools, mappings), as YAML gives.
+        source, path : str
+            File and key path of `data`, for messages.
+
+        Raises
+        ------
+        ValueError
+            A `safe_yaml.ConfigError` naming the source and the key path of the field, e.g.
+            ``g.yaml: fingers[1].design.Lx: must be > 0 [m], got -0.11``.
+
+        """
+        from ..safe_yaml import Where
+        where = Where(source, path)
+        data = where.mapping(data, {f.name for f in dataclasses.fields(cls)},
+                             what='a mapping of ActuatorDesign fields')
+        kwargs = {}
+        for name, value in data.items():
+            at = where / name
+            if name in _MATERIAL_FIELDS:
+                value = at.mapping(value, {'E1', 'E2', 'nu'})
+                missing = sorted({'E1', 'E2', 'nu'} - set(value))
+                if missing:
+                    raise at.error(f'needs E1, E2 and nu; missing {", ".join(missing)}')
+                numbers = {key: (at / key).number(v, '[-]' if key == 'nu' else '[Pa]')
+                           for key, v in value.items()}
+                try:
+                    kwargs[name] = Material(**numbers)
+                except ValueError as exc:
+                    raise at.error(str(exc)) from None
+            elif name == 'emc_coefficients':
+                items = at.sequence(value, 4, 4, what='numbers (a1, a2, a3, a4) [Pa]')
+                kwargs[name] = tuple((at / i).number(c, '[Pa]') for i, c in enumerate(items))
+            elif name == 'ribs':
+                kwargs[name] = at.boolean(value)
+            else:
+                kwargs[name] = at.number(value, _UNITS.get(name, '[-]'))
+        try:
+            return cls(**kwargs)
+        except ArgumentError as exc:
+            raise where.sub(exc.argument).error(exc.reason) from None
 
     @classmethod
     def from_yaml(cls, path):
-        """Load a design from a YAML file of SI fields; unknown keys are rejected by name."""
-        import yaml
-        path = pathlib.Path(path)
-        try:
-            data = safe_load_yaml(path.read_text())
-        except OSError as exc:
-            raise ValueError(f'{path}: cannot read design: {exc}') from exc
-        except yaml.YAMLError as exc:
-            raise ValueError(f'{path}: malformed YAML: {exc}') from exc
-        return cls.from_dict(data, source=str(path))
+        """
+        Load a design from a YAML file of SI fields (`safe_yaml.load_yaml`, then `from_dict`).
+
+        Raises
+        ------
+        ValueError
+            A `safe_yaml.ConfigError`, one line naming the file, the key path and the
+            problem, for anything wrong with the file.
+
+        """
+        from ..safe_yaml import load_yaml
+        return cls.from_dict(load_yaml(path, what='actuator design'), source=os.fspath(path))
 
     def to_yaml(self, path):
         """Write every field to a YAML file that `from_yaml` reads back exactly."""

@@ -15,7 +15,7 @@ from .pcc_kernels import half_angle_sinc_kernel, section_arrays
 from .section_law import station_layout
 from .solver import (AXES, check_pressure_model, check_rigidity, pressure_work_factor,
                      ResultPositions, rigidity_result)
-from .validation import real_number, real_pair
+from .validation import check_load, real_number, warm_start_allowed
 
 __all__ = ['ArcSolver', 'RodSolver', 'LadderResult', 'RodResult', 'ArcResult']
 
@@ -152,13 +152,6 @@ def _set_common(solver, design, pressure_model, tol, samples, max_iterations):
     solver.length = design.free_length
 
 
-def _check_solve(pressure, tip_force):
-    pressure = real_number('pressure', pressure, '[Pa]')
-    if pressure < 0.0:
-        raise ValueError(f'`pressure` must be >= 0 (gauge) [Pa], got {pressure}')
-    return pressure, np.array(real_pair('tip_force', tip_force, '[N]'))
-
-
 class _LadderSolver:
     """
     Shared solve and rigidity of the non-CCM rungs: discretisations of the one engine.
@@ -212,7 +205,8 @@ class _LadderSolver:
         initial : result of this solver, optional
             Warm start: Newton starts there, and if that does not reach a stable
             equilibrium the solve starts again from the flat, unstrained state as
-            with None. It changes the iteration count, never the answer.
+            with None. It changes the iteration count, never the answer; it is ignored
+            above `validation.UNIQUE_LOAD` of tip load.
 
         Returns
         -------
@@ -220,12 +214,15 @@ class _LadderSolver:
             `success` False (with a message) when Newton and continuation both fail.
 
         """
-        pressure, force = _check_solve(pressure, tip_force)
+        pressure, force = check_load(pressure, tip_force, self.design.max_pressure)
+        force = np.array(force)
         if initial is not None and not (isinstance(initial, self._result_type)
                                         and initial.solver._compatible(self)):
             raise ValueError(f'`initial` must be None or a {self._result_type.__name__} of a '
                              'solver with the same discretisation')
-        x0 = None if initial is None else self._pack(initial.state)
+        # Beyond UNIQUE_LOAD a warm start could pick another stable branch: start cold.
+        warm = initial is not None and warm_start_allowed(math.hypot(*force))
+        x0 = self._pack(initial.state) if warm else None
         loads = self.tip_loads(force)
         out = engine.solve(self, pressure, loads, self._options, x0)
         return self._result(out.x, out.status, out.iterations, out.gradient, out.step,

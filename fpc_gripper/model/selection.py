@@ -17,7 +17,7 @@ from .pcc import PCCSolver
 from .section import uniform_edges
 from .section_law import station_layout
 from .solver import CCMSolver, check_pressure_model, SolverStatus
-from .validation import real_number, real_pair
+from .validation import check_load, real_number
 
 __all__ = ['Scene', 'ModelChoice', 'RUNGS', 'choose_model', 'load_error_model', 'make_solver',
            'scene_turning', 'a_posteriori_error', 'aligned_edges', 'AdaptiveSolver']
@@ -57,11 +57,9 @@ class Scene:
         if not isinstance(self.design, ActuatorDesign):
             raise TypeError(f'`design` must be an ActuatorDesign, got '
                             f'{type(self.design).__name__}')
-        pressure = real_number('pressure', self.pressure, '[Pa]')
-        if pressure < 0.0:
-            raise ValueError(f'`pressure` must be >= 0 (gauge) [Pa], got {pressure}')
+        pressure, force = check_load(self.pressure, self.tip_force, self.design.max_pressure)
         object.__setattr__(self, 'pressure', pressure)
-        object.__setattr__(self, 'tip_force', real_pair('tip_force', self.tip_force, '[N]'))
+        object.__setattr__(self, 'tip_force', force)
         object.__setattr__(self, 'pressure_model', check_pressure_model(self.pressure_model))
 
     @property

@@ -13,7 +13,8 @@ from .engine import linear_solve, linear_step, NewtonOptions, SolverStatus
 from .kinematics import (from_scaled, material_positions, midplane_samples, node_positions,
                          to_scaled)
 from .section import build_segments, uniform_edges
-from .validation import arc_lengths, real_number, real_pair
+from .validation import (arc_lengths, check_force, check_load, real_number,
+                         warm_start_allowed)
 
 __all__ = ['CCMSolver', 'CCMResult', 'RigidityResult', 'SolverStatus', 'PRESSURE_MODELS',
            'PRESSURE_MODEL_NAMES', 'AXES', 'check_rigidity', 'rigidity_result',
@@ -400,6 +401,7 @@ class CCMSolver:
                 raise ValueError(f'`point_loads` items must be (s [m], fx [N], fz [N]), '
                                  f'got {item!r}')
             s, fx, fz = (real_number('point_loads', v, '[m, N]') for v in item)
+            check_force('point_loads', (fx, fz))
             node = int(np.argmin(np.abs(self.segments.edges - s)))
             if abs(self.segments.edges[node] - s) > 1e-12 or node == 0:
                 raise ValueError(f'point load at s = {s} [m] needs a segment edge there; '
@@ -488,19 +490,27 @@ class CCMSolver:
         Raises
         ------
         ValueError, TypeError
-            On non-finite or negative pressure, malformed loads or initial state.
+            On non-finite or negative pressure, malformed loads or initial state, and on
+            loads outside the model's envelope (`validation.ENVELOPE`: gauge pressure up
+            to twice `design.max_pressure`, tip and point loads up to 5 N each).
+
+        Notes
+        -----
+        With more than `validation.UNIQUE_LOAD` of load in all, `initial` is ignored: there
+        a load can hold the finger on more than one stable branch, and the answer must not
+        depend on what was solved before.
 
         References
         ----------
         Zhou, Headings, Dapino (2022), eq. (21); docs/physics.md, section 8.
 
         """
-        pressure = real_number('pressure', pressure, '[Pa]')
-        if pressure < 0.0:
-            raise ValueError(f'`pressure` must be >= 0 (gauge) [Pa], got {pressure}')
-        tip_force = real_pair('tip_force', tip_force, '[N]')
+        pressure, tip_force = check_load(pressure, tip_force, self.design.max_pressure)
         loads = self._loads(tip_force, point_loads)
-        out = engine.solve(self, pressure, loads, self._options, self._initial_state(initial))
+        start = self._initial_state(initial)
+        if not warm_start_allowed(sum(math.hypot(*force) for _, force in loads)):
+            start = None
+        out = engine.solve(self, pressure, loads, self._options, start)
         return self._result(out.x, out.status, out.iterations, out.gradient, out.step,
                             out.min_eig, out.fraction, pressure, loads, tip_force)
 

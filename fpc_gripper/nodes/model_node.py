@@ -524,7 +524,7 @@ class ModelNode(Node):
 
 
 def main(args=None):
-    """Run the model node until SIGINT or SIGTERM: 0 then, 1 when it cannot start."""
+    """Run the model node until SIGINT or SIGTERM: 0 then, 2 on a bad config, else 1."""
     return run_node(ModelNode, 'model_node', args)
 
 

@@ -24,11 +24,14 @@ from fpc_gripper.nodes.parameters import float_range
 from fpc_gripper.nodes.parameters import int_range
 from fpc_gripper.nodes.runner import run_node
 from fpc_gripper.regulators.base import BackendFault
+from fpc_gripper.regulators.core import Level
+from fpc_gripper.regulators.core import MonitorSettings
+from fpc_gripper.regulators.core import RegulatorCore
 from fpc_gripper.regulators.factory import BACKEND_KINDS
 from fpc_gripper.regulators.factory import make_backend
-from fpc_gripper.regulators.safety import ChannelSupervisor
+from fpc_gripper.regulators.modbus import RegisterMap
 from fpc_gripper.regulators.safety import SafeState
-from fpc_gripper.regulators.safety import SupervisorMode
+from fpc_gripper.safe_yaml import ConfigError
 
 SAFE_STATES = tuple(s.value for s in SafeState)
 
@@ -36,13 +39,15 @@ SAFE_STATES = tuple(s.value for s in SafeState)
 _STRUCTURAL = ('gripper_config', 'backend', 'modbus_config', 'modbus_host', 'modbus_port',
                'sim_time_constant_s', 'sim_slew_rate_pa_s', 'sim_deadband_pa',
                'sim_noise_std_pa', 'sim_max_output_pa', 'sim_full_scale_pa', 'sim_adc_bits',
-               'sim_seed')
+               'sim_seed', 'tracking_tolerance_pa', 'tracking_timeout_s',
+               'overpressure_margin_pa')
 
 _COMMAND_QOS = QoSProfile(depth=10, history=HistoryPolicy.KEEP_LAST,
                           reliability=ReliabilityPolicy.RELIABLE)
 _THROTTLE_S = 2.0
 _RECONNECT_S = 1.0
-_WATCHDOG_WORDS = {SupervisorMode.IDLE: 'waiting', SupervisorMode.WATCHDOG: 'expired'}
+_LEVELS = {Level.OK: DiagnosticStatus.OK, Level.WARN: DiagnosticStatus.WARN,
+           Level.ERROR: DiagnosticStatus.ERROR}
 
 
 def _parameter_table():
@@ -79,6 +84,16 @@ def _parameter_table():
          {'read_only': True}),
         ('frame_prefix', '', 'Prefix of the frame id of the published pressures '
          "(<prefix>finger_<i>), as model_node's.", {'read_only': True}),
+        ('tracking_tolerance_pa', 2.0e4,
+         'Largest |measured - setpoint| that counts as following the setpoint [Pa].',
+         {'floating_point_range': float_range(1.0e2, 1.0e6)}),
+        ('tracking_timeout_s', 2.0,
+         'Time a measurement may stay off the setpoint before the channel is in fault '
+         '(leak, blocked valve, stuck sensor) [s]; 0 disables.',
+         {'floating_point_range': float_range(0.0, 3600.0)}),
+        ('overpressure_margin_pa', 5.0e4,
+         'A measurement above max_pressure plus this vents the channel at once [Pa].',
+         {'floating_point_range': float_range(0.0, 1.0e6)}),
         ('sim_time_constant_s', 0.15, 'Simulated regulator first-order time constant [s].',
          {'floating_point_range': float_range(1.0e-3, 100.0)}),
         ('sim_slew_rate_pa_s', 2.0e6, 'Simulated regulator slew limit [Pa/s].',
@@ -132,17 +147,16 @@ class RegulatorBridge(LifecycleNode):
         self._configured = False
         self._active = False
         self._finger_names = ()
+        self._core = None
         self._supervisors = ()
-        self._measured = ()
+        self._config_error = None
         self._pressure_pubs = ()
         self._command_subs = ()
         self._diag_pub = None
         self._timer = None
         self._last_diag_time = None
         self._last_levels = None
-        self._backend_fault = None
         self._config_max_pressure = math.inf
-        self._last_reconnect = None
         self.add_on_set_parameters_callback(self._validate_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
         if self.get_parameter('auto_activate').value:
@@ -189,7 +203,9 @@ class RegulatorBridge(LifecycleNode):
                            f'now {self.lifecycle_state}')
                 if raise_on_failure:
                     raise RuntimeError(message)
-                self.get_logger().error(message)
+                if trigger != self.trigger_configure:
+                    # on_configure has logged its reason already: one line per failure.
+                    self.get_logger().error(message)
                 return False
         return self.lifecycle_state == 'active'
 
@@ -213,6 +229,11 @@ class RegulatorBridge(LifecycleNode):
         """Finger names of the gripper config, in channel order."""
         return self._finger_names
 
+    @property
+    def config_error(self):
+        """The `ConfigError` of the last failed configure (None if it was not the config)."""
+        return self._config_error
+
     def destroy_node(self):
         """Put every channel in its safe state, close the backend, then destroy the node."""
         self._release_backend('node destroyed')
@@ -222,15 +243,19 @@ class RegulatorBridge(LifecycleNode):
 
     def on_configure(self, state):
         """Load the gripper config, build and connect the backend, create the topics."""
+        self._config_error = None
         try:
             self._configure()
         except (BackendFault, ImportError, KeyError, OSError, TypeError, ValueError) as exc:
+            if isinstance(exc, ConfigError):
+                self._config_error = exc
             self.get_logger().error(f'configure failed: {exc}')
             if self._backend is not None:
                 # Nothing was commanded in this configuration: just let go of the device.
                 self._backend.close()
                 self._backend = None
             self._destroy_entities()
+            self._core = None
             self._supervisors = ()
             return TransitionCallbackReturn.FAILURE
         self._configured = True
@@ -238,9 +263,8 @@ class RegulatorBridge(LifecycleNode):
 
     def on_activate(self, state):
         """Start the control timer."""
-        now = self._latch()
-        for supervisor in self._supervisors:
-            supervisor.start(now)
+        # Activation acknowledges the latched faults (over-pressure, tracking).
+        self._core.start(self._latch())
         self._active = True
         self._last_diag_time = None
         self._start_timer()
@@ -254,8 +278,7 @@ class RegulatorBridge(LifecycleNode):
         self._stop_timer()
         self._active = False
         now = self._latch()
-        for supervisor in self._supervisors:
-            supervisor.stop(now)
+        self._core.stop(now)
         self._control_step(now, force_diagnostics=True)
         return super().on_deactivate(state)
 
@@ -309,8 +332,8 @@ class RegulatorBridge(LifecycleNode):
         names = {p.name for p in parameters}
         if names & {'max_pressure', 'rate_limit_pa_s', 'command_timeout_s', 'safe_state'}:
             limits = self._limits()
-            for supervisor in self._supervisors:
-                supervisor.configure(**limits)
+            if self._core is not None:
+                self._core.configure(**limits)
             self.get_logger().info(
                 f'limits now max_pressure {limits["max_pressure"]:.0f} Pa gauge, '
                 f'rate_limit {limits["rate_limit_pa_s"]:.0f} Pa/s, command_timeout '
@@ -336,7 +359,10 @@ class RegulatorBridge(LifecycleNode):
             result = self._validate_parameters([param(name)])
             if not result.successful:
                 raise ValueError(result.reason)
-        config = load_gripper_config(param('gripper_config').value)
+        config, register_map = load_bridge_config(
+            param('gripper_config').value,
+            param('backend').value if self._injected_backend is None else 'injected',
+            param('modbus_config').value)
         self._finger_names = tuple(f.name for f in config.fingers)
         self._frames = tuple(param('frame_prefix').value + name for name in self._finger_names)
         n_channels = len(self._finger_names)
@@ -353,14 +379,18 @@ class RegulatorBridge(LifecycleNode):
         if self._injected_backend is not None:
             self._backend = self._injected_backend
         else:
-            self._backend = self._build_backend(n_channels)
+            self._backend = self._build_backend(n_channels, register_map)
         if self._backend.n_channels < n_channels:
             raise ValueError(f'backend has {self._backend.n_channels} channels, the gripper '
                              f'config needs {n_channels}')
         self._backend.connect()
-        self._backend_fault = None
-        self._supervisors = tuple(ChannelSupervisor(**self._limits()) for _ in range(n_channels))
-        self._measured = [math.nan] * n_channels
+        self._core = RegulatorCore(self._backend, n_channels, self._limits(), MonitorSettings(
+            tracking_tolerance_pa=param('tracking_tolerance_pa').value,
+            tracking_timeout_s=param('tracking_timeout_s').value,
+            overpressure_margin_pa=param('overpressure_margin_pa').value,
+            reconnect_interval_s=_RECONNECT_S,
+            atmospheric_pressure=param('atmospheric_pressure').value))
+        self._supervisors = self._core.supervisors
         self._last_levels = None
         self._pressure_pubs = tuple(
             self.create_lifecycle_publisher(FluidPressure, f'{name}/pressure',
@@ -373,7 +403,7 @@ class RegulatorBridge(LifecycleNode):
                                      functools.partial(self._on_command, i), _COMMAND_QOS)
             for i, name in enumerate(self._finger_names))
 
-    def _build_backend(self, n_channels):
+    def _build_backend(self, n_channels, register_map):
         param = self.get_parameter
         kind = param('backend').value
         self._backend_kind = kind
@@ -391,11 +421,7 @@ class RegulatorBridge(LifecycleNode):
                 # The model advances to the time latched at each control step, so every
                 # published stamp is exactly the model time of its sample.
                 clock=self._backend_time)
-        path = param('modbus_config').value
-        if not path:
-            raise ValueError('`modbus_config` is empty: backend modbus needs a register map '
-                             '(see msg_configs/modbus_example.yaml)')
-        return make_backend('modbus', register_map=path,
+        return make_backend('modbus', register_map=register_map,
                             host=param('modbus_host').value or None,
                             port=param('modbus_port').value or None)
 
@@ -415,14 +441,10 @@ class RegulatorBridge(LifecycleNode):
         """Send every channel's safe setpoint (best effort), then close the backend."""
         if self._backend is None:
             return
-        now = self._latch()
-        for i, supervisor in enumerate(self._supervisors):
-            supervisor.stop(now)
-            try:
-                self._backend.set_pressure(i, supervisor.update(now).setpoint)
-            except BackendFault as exc:
+        if self._core is not None:
+            for channel, error in self._core.release(self._latch()):
                 self.get_logger().warning(
-                    f'{why}: could not send the safe state to channel {i}: {exc}')
+                    f'{why}: could not send the safe state to channel {channel}: {error}')
         self._backend.close()
         self._backend = None
 
@@ -477,111 +499,100 @@ class RegulatorBridge(LifecycleNode):
         self._control_step(self._latch())
 
     def _control_step(self, now, force_diagnostics=False):
-        """Update every supervisor, write setpoints, read and publish pressures and health."""
-        if self._backend is None:
+        """Run the core's step; publish what it measured and the channels' health."""
+        if self._backend is None or self._core is None:
             return
-        fault = None
-        outputs = []
+        step = self._core.step(now)
         atmospheric = self.get_parameter('atmospheric_pressure').value
         stamp = Time(nanoseconds=int(round(now * 1e9))).to_msg()
-        for i, supervisor in enumerate(self._supervisors):
-            output = supervisor.update(now)
-            outputs.append(output)
-            try:
-                self._backend.set_pressure(i, output.setpoint)
-                value, variance = self._backend.read_pressure(i)
-            except BackendFault as exc:
-                fault = fault or str(exc)
-                continue
-            self._measured[i] = value
+        for sample in step.samples:
             msg = FluidPressure()
             msg.header.stamp = stamp
-            msg.header.frame_id = self._frames[i]
-            msg.fluid_pressure = value + atmospheric
-            msg.variance = variance
-            self._pressure_pubs[i].publish(msg)
-        status = self._backend.status()
-        if fault is None and not status.ok:
-            fault = status.fault or 'backend not ok'
-            if not status.connected and (self._last_reconnect is None
-                                         or now - self._last_reconnect >= _RECONNECT_S):
-                self._last_reconnect = now
-                try:
-                    self._backend.connect()
-                except BackendFault as exc:
-                    fault = str(exc)
-        self._track_fault(fault, now)
-        if fault is not None:
-            # Re-evaluate so that the diagnostics show the safe state entered this step.
-            outputs = [s.update(now) for s in self._supervisors]
-        self._publish_diagnostics(now, outputs, status, force_diagnostics)
-
-    def _track_fault(self, fault, now):
-        if fault is not None:
-            if self._backend_fault is None:
-                self.get_logger().error(f'backend fault, all channels to safe state: {fault}')
+            msg.header.frame_id = self._frames[sample.channel]
+            msg.fluid_pressure = sample.pressure + atmospheric
+            msg.variance = sample.variance
+            self._pressure_pubs[sample.channel].publish(msg)
+        for level, text in step.events:
+            # One call site per severity: rclpy refuses two severities at one call site.
+            if level == Level.ERROR:
+                self.get_logger().error(text)
             else:
-                self.get_logger().error(f'backend fault persists: {fault}',
-                                        throttle_duration_sec=_THROTTLE_S)
-            for supervisor in self._supervisors:
-                supervisor.report_fault(fault, now)
-        elif self._backend_fault is not None:
-            self.get_logger().info('backend healthy again; channels stay in the safe state '
-                                   'until the next command')
-            for supervisor in self._supervisors:
-                supervisor.clear_fault(now)
-        self._backend_fault = fault
+                self.get_logger().info(text)
+        self._publish_diagnostics(now, step.reports, force_diagnostics)
 
-    def _publish_diagnostics(self, now, outputs, status, force):
-        statuses = [self._channel_status(i, out, status) for i, out in enumerate(outputs)]
-        levels = [(s.level, out.mode) for s, out in zip(statuses, outputs)]
+    def _publish_diagnostics(self, now, reports, force):
+        levels = [(r.level, r.mode) for r in reports]
         period = 1.0 / self.get_parameter('diagnostics_rate_hz').value
-        due = self._last_diag_time is None or now - self._last_diag_time >= period
+        # A clock that stepped back must not silence the periodic diagnostics.
+        due = self._last_diag_time is None or not 0.0 <= now - self._last_diag_time < period
         if not (force or due or levels != self._last_levels):
             return
         self._last_diag_time = now
         self._last_levels = levels
         array = DiagnosticArray()
         array.header.stamp = Time(nanoseconds=int(round(now * 1e9))).to_msg()
-        array.status = statuses
+        array.status = [self._channel_status(i, r) for i, r in enumerate(reports)]
         self._diag_pub.publish(array)
 
-    def _channel_status(self, index, output, backend_status):
-        supervisor = self._supervisors[index]
-        if output.mode == SupervisorMode.FAULT and supervisor.fault is not None:
-            level = DiagnosticStatus.ERROR
-        elif output.mode in (SupervisorMode.WATCHDOG, SupervisorMode.FAULT):
-            level = DiagnosticStatus.WARN
-        else:
-            level = DiagnosticStatus.OK
-        age = output.command_age
-        values = {
-            'setpoint_pa_gauge': f'{output.setpoint:.1f}',
-            'measured_pa_gauge': f'{self._measured[index]:.1f}',
-            'command_pa_gauge': 'none' if output.command is None else f'{output.command:.1f}',
-            'clamped': str(output.clamped),
-            'watchdog': _WATCHDOG_WORDS.get(output.mode, 'ok'),
-            'mode': output.mode.name.lower(),
-            'command_age_s': 'none' if age is None else f'{age:.6f}',
-            'safe_state': supervisor.safe_state.value,
-            'max_pressure_pa_gauge': f'{supervisor.max_pressure:.1f}',
-            'backend': self._backend_kind,
-            'backend_fault': supervisor.fault or (backend_status.fault or 'none'),
-        }
+    def _channel_status(self, index, report):
+        values = dict(report.values, backend=self._backend_kind)
         return DiagnosticStatus(
-            level=level, name=f'{self.get_fully_qualified_name()}: {self._finger_names[index]}',
-            message=output.reason, hardware_id=f'{self._backend_kind}:{index}',
+            level=_LEVELS[report.level],
+            name=f'{self.get_fully_qualified_name()}: {self._finger_names[index]}',
+            message=report.message, hardware_id=f'{self._backend_kind}:{index}',
             values=[KeyValue(key=k, value=v) for k, v in values.items()])
+
+
+def load_bridge_config(gripper_config, backend, modbus_config):
+    """
+    Load and check every config file the bridge needs, before any device is touched.
+
+    Parameters
+    ----------
+    gripper_config : str
+        Gripper YAML path.
+    backend : str
+        'sim', 'modbus' or 'injected' (a backend object given to the node).
+    modbus_config : str
+        Register-map YAML path (backend 'modbus').
+
+    Returns
+    -------
+    (GripperConfig, RegisterMap or None)
+
+    Raises
+    ------
+    ConfigError
+        One line naming the file, the key path and the problem.
+
+    """
+    config = load_gripper_config(gripper_config)
+    if backend != 'modbus':
+        return config, None
+    if not modbus_config:
+        raise ConfigError('modbus_config', '', 'is empty: backend modbus needs a register map '
+                                               '(see msg_configs/modbus_example.yaml)')
+    return config, RegisterMap.from_yaml(modbus_config)
 
 
 def main(args=None):
     """
-    Run the bridge until SIGINT or SIGTERM: 0 then, 1 when it cannot start.
+    Run the bridge until SIGINT or SIGTERM: 0 then, 2 on a bad config, else 1.
 
-    It configures and activates itself unless ``auto_activate`` is false.
+    It configures and activates itself unless ``auto_activate`` is false; when that
+    activation fails, it exits (2 when the configuration is invalid, 1 when the device
+    cannot be reached, after the one log line that says why) rather than stay up
+    half-configured.
     """
     return run_node(functools.partial(RegulatorBridge, auto_activate_default=True),
-                    'regulator_bridge', args)
+                    'regulator_bridge', args, check=_activation_exit_code)
+
+
+def _activation_exit_code(node):
+    """Exit code for a bridge whose auto-activation failed, None when it may spin."""
+    if node.get_parameter('auto_activate').value and node.lifecycle_state != 'active':
+        return 2 if node.config_error is not None else 1
+    return None
 
 
 if __name__ == '__main__':

@@ -13,11 +13,14 @@ from rclpy.impl.implementation_singleton import rclpy_implementation
 from rclpy.logging import get_logger
 from rclpy.signals import SignalHandlerOptions
 
+from fpc_gripper.safe_yaml import ConfigError
+
 __all__ = ['FORCE_AFTER_S', 'START_ERRORS', 'StopRequest', 'run_node']
 
 #: A stop signal this long after the first one interrupts a callback still running [s].
 FORCE_AFTER_S = 1.0
-#: What a node's constructor raises for a bad configuration: exit 1 with a message.
+#: What a node's constructor raises when it cannot start: exit 1 with a message (a
+#: `ConfigError`, an unusable config file, exits 2).
 START_ERRORS = (ValueError, OSError, ParameterException)
 _STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 RCLError = rclpy_implementation.RCLError
@@ -95,7 +98,7 @@ class _Waker:
         self._read.close()
 
 
-def run_node(build, name, args=None):
+def run_node(build, name, args=None, check=None):
     """
     Build a node, spin it until SIGINT or SIGTERM, then destroy it and shut rclpy down.
 
@@ -115,12 +118,16 @@ def run_node(build, name, args=None):
         Logger name for a failed start.
     args : list of str, optional
         Command-line arguments for ``rclpy.init`` (default ``sys.argv``).
+    check : callable, optional
+        ``check(node)`` after the build returns an exit code when the node must not spin
+        (it has logged why), or None.
 
     Returns
     -------
     int
-        0 after a stop signal or an external shutdown, 1 when the node could not start
-        (one fatal log line names the reason).
+        0 after a stop signal or an external shutdown; 2 when a config file is invalid
+        and 1 when the node could not start otherwise (one fatal log line names the
+        reason); or what `check` returned.
 
     """
     stop = StopRequest()
@@ -130,10 +137,16 @@ def run_node(build, name, args=None):
         try:
             rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
             node = build()
+        except ConfigError as exc:
+            get_logger(name).fatal(f'invalid config: {exc}')
+            return 2
         except (*START_ERRORS, RCLError) as exc:
             # RCLError: rcl refused the command line (say a --params-file it cannot parse).
             get_logger(name).fatal(f'cannot start: {exc}')
             return 1
+        code = None if check is None else check(node)
+        if code is not None:
+            return code
         executor = SingleThreadedExecutor()
         executor.add_node(node)
         waker = _Waker(node.create_guard_condition(lambda: None))

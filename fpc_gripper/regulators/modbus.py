@@ -3,16 +3,16 @@
 import dataclasses
 import inspect
 import math
-import pathlib
+import os
 import time
 import typing
-
-import yaml
 
 from fpc_gripper.regulators.base import BackendFault
 from fpc_gripper.regulators.base import BackendStatus
 from fpc_gripper.regulators.base import check_channel
 from fpc_gripper.regulators.base import check_pressure
+from fpc_gripper.safe_yaml import load_yaml
+from fpc_gripper.safe_yaml import Where
 
 REGISTER_TYPES = ('holding', 'input')
 
@@ -22,6 +22,13 @@ _CHANNEL_KEYS = ('name', 'setpoint', 'readback', 'scaling')
 _REGISTER_KEYS = ('address', 'type')
 _SCALING_KEYS = ('counts_per_pa', 'full_scale_counts', 'full_scale_pa', 'offset_counts',
                  'signed')
+#: Bounds of a register map: channels, name and host lengths, request timeout [s] and the
+#: largest pressure a scale or a noise figure may name [Pa].
+MAX_CHANNELS = 64
+MAX_NAME_CHARS = 64
+MAX_HOST_CHARS = 253
+MAX_TIMEOUT_S = 60.0
+MAX_PRESSURE_PA = 1.0e8
 
 
 @dataclasses.dataclass(frozen=True)
@@ -129,71 +136,60 @@ class RegisterMap:
         """
         Load a register map from YAML (see ``msg_configs/modbus_example.yaml``).
 
+        The file is read with `fpc_gripper.safe_yaml.load_yaml` (size, depth and alias
+        limits, no duplicate keys, decimal numbers only).
+
         Raises
         ------
         ValueError
-            If the file is not valid YAML or a key is unknown, missing or out of
-            range; the message names the file and the key.
+            A `safe_yaml.ConfigError`, one line naming the file, the key path and the
+            problem, for anything wrong with the file.
         """
-        path = pathlib.Path(path)
-        try:
-            text = path.read_text(encoding='utf-8')
-        except OSError as exc:
-            raise ValueError(f'`path` cannot be read: {path}: {exc}') from exc
-        try:
-            data = yaml.safe_load(text)
-        except yaml.YAMLError as exc:
-            raise ValueError(f'{path}: not valid YAML: {exc}') from exc
-        return cls.from_dict(data, source=str(path))
+        return cls.from_dict(load_yaml(path, what='Modbus register map'),
+                             source=os.fspath(path))
 
     @classmethod
     def from_dict(cls, data, source='<dict>'):
         """Build a register map from the parsed YAML structure (see :meth:`from_yaml`)."""
-        where = f' (in {source})'
-        top = _mapping(data, 'the document', where)
-        _known(top, _TOP_KEYS, 'the top level', where)
-        conn = _mapping(top.get('connection', {}), 'connection', where)
-        _known(conn, _CONNECTION_KEYS, 'connection', where)
+        where = Where(source)
+        top = where.mapping(data, _TOP_KEYS, what='a mapping of register-map keys')
+        at = where / 'connection'
+        conn = at.mapping(top.get('connection', {}), _CONNECTION_KEYS)
         if 'device_id' in conn and 'unit' in conn:
-            raise ValueError(f"connection: give 'device_id' or its alias 'unit', not both{where}")
-        host = conn.get('host', '127.0.0.1')
-        if not isinstance(host, str) or not host:
-            raise ValueError(f'connection.host must be a non-empty string, got {host!r}{where}')
-        port = _integer(conn.get('port', 502), 'connection.port', 1, 65535, where)
+            raise at.error("give 'device_id' or its alias 'unit', not both")
+        host = (at / 'host').string(conn.get('host', '127.0.0.1'), MAX_HOST_CHARS,
+                                    what='a host name or address')
+        port = (at / 'port').integer(conn.get('port', 502), 1, 65535)
         device_key = 'unit' if 'unit' in conn else 'device_id'
-        device_id = _integer(conn.get(device_key, 1), f'connection.{device_key}', 0, 255, where)
-        timeout = _number(conn.get('timeout_s', 0.5), 'connection.timeout_s', where, '[s]')
-        if timeout <= 0.0:
-            raise ValueError(f'connection.timeout_s must be > 0 [s], got {timeout}{where}')
-        noise = _number(top.get('noise_std_pa', 0.0), 'noise_std_pa', where, '[Pa]')
-        if noise < 0.0:
-            raise ValueError(f'noise_std_pa must be >= 0 [Pa], got {noise}{where}')
+        device_id = (at / device_key).integer(conn.get(device_key, 1), 0, 255)
+        timeout = (at / 'timeout_s').number(conn.get('timeout_s', 0.5), '[s]', 0.0,
+                                            MAX_TIMEOUT_S, low_open=True)
+        noise = (where / 'noise_std_pa').number(top.get('noise_std_pa', 0.0), '[Pa]', 0.0,
+                                                MAX_PRESSURE_PA)
         default_scaling = top.get('scaling')
-        channels = top.get('channels')
-        if not isinstance(channels, list) or not channels:
-            raise ValueError(f'channels must be a non-empty list, got {channels!r}{where}')
+        channels = (where / 'channels').sequence(top.get('channels'), 1, MAX_CHANNELS,
+                                                 what='channel mappings')
         parsed = []
         for i, entry in enumerate(channels):
-            key = f'channels[{i}]'
-            entry = _mapping(entry, key, where)
-            _known(entry, _CHANNEL_KEYS, key, where)
+            at = where / 'channels' / i
+            entry = at.mapping(entry, _CHANNEL_KEYS)
             for required in ('setpoint', 'readback'):
                 if required not in entry:
-                    raise ValueError(f'{key}.{required} is missing{where}')
-            setpoint = _register(entry['setpoint'], f'{key}.setpoint', where)
+                    raise (at / required).error('is missing')
+            setpoint = _register(entry['setpoint'], at / 'setpoint')
             if setpoint.kind != 'holding':
-                raise ValueError(f"{key}.setpoint.type must be 'holding' (input registers are "
-                                 f'read-only), got {setpoint.kind!r}{where}')
-            readback = _register(entry['readback'], f'{key}.readback', where)
-            raw_scaling = entry.get('scaling', default_scaling)
-            if raw_scaling is None:
-                raise ValueError(f'{key}.scaling is missing and there is no top-level '
-                                 f'scaling{where}')
-            scale_key = f'{key}.scaling' if 'scaling' in entry else 'scaling'
-            scaling = _scaling(raw_scaling, scale_key, where)
-            name = entry.get('name', f'channel_{i}')
+                raise (at / 'setpoint' / 'type').error(
+                    f"must be 'holding' (input registers are read-only), got {setpoint.kind!r}")
+            readback = _register(entry['readback'], at / 'readback')
+            if 'scaling' in entry:
+                scaling = _scaling(entry['scaling'], at / 'scaling')
+            elif default_scaling is None:
+                raise (at / 'scaling').error('is missing and there is no top-level scaling')
+            else:
+                scaling = _scaling(default_scaling, where / 'scaling')
+            name = (at / 'name').string(entry.get('name', f'channel_{i}'), MAX_NAME_CHARS)
             parsed.append(ChannelMap(setpoint=setpoint, readback=readback, scaling=scaling,
-                                     name=str(name)))
+                                     name=name))
         return cls(channels=tuple(parsed), host=host, port=port, device_id=device_id,
                    timeout_s=timeout, noise_std_pa=noise)
 
@@ -224,9 +220,9 @@ class ModbusRegulator:
                 raise ValueError(f'`host` must be a non-empty string, got {host!r}')
             overrides['host'] = host
         if port is not None:
-            overrides['port'] = _integer(port, '`port`', 1, 65535, '')
+            overrides['port'] = _integer(port, 'port', 1, 65535)
         if device_id is not None:
-            overrides['device_id'] = _integer(device_id, '`device_id`', 0, 255, '')
+            overrides['device_id'] = _integer(device_id, 'device_id', 0, 255)
         if timeout_s is not None:
             if not float(timeout_s) > 0.0:
                 raise ValueError(f'`timeout_s` must be > 0 [s], got {timeout_s!r}')
@@ -323,8 +319,18 @@ class ModbusRegulator:
         method = ('read_holding_registers' if cmap.readback.kind == 'holding'
                   else 'read_input_registers')
         response = self._request(method, cmap.readback.address, count=1)
+        registers = getattr(response, 'registers', None) or ()
+        if len(registers) != 1:
+            raise self._failed(f'{method}({cmap.readback.address}) returned '
+                               f'{len(registers)} registers, not 1')
         variance = self.register_map.noise_std_pa ** 2 + cmap.scaling.resolution_pa ** 2 / 12.0
-        return cmap.scaling.to_pressure(response.registers[0]), variance
+        return cmap.scaling.to_pressure(registers[0]), variance
+
+    def readback_range(self, channel):
+        """Return the (low, high) pressures the readback register can represent [Pa gauge]."""
+        scaling = self.register_map.channels[check_channel(channel, self.n_channels)].scaling
+        return (scaling.to_pressure(scaling.min_counts & 0xFFFF),
+                scaling.to_pressure(scaling.max_counts & 0xFFFF))
 
     def status(self):
         """Return the connection state and the last error, without any traffic."""
@@ -340,8 +346,9 @@ class ModbusRegulator:
             raise BackendFault('Modbus regulator not connected: call connect() first')
         if not self._client.connected:
             now = self._clock()
+            # A clock that stepped back must not hold off reconnection until it catches up.
             if self._last_attempt is not None and \
-                    now - self._last_attempt < self._reconnect_interval:
+                    0.0 <= now - self._last_attempt < self._reconnect_interval:
                 raise BackendFault(self._fault or 'Modbus connection lost')
             self.connect()
         kwargs[self._device_kw] = self.register_map.device_id
@@ -361,81 +368,48 @@ class ModbusRegulator:
         return BackendFault(message)
 
 
-def _mapping(value, key, where):
-    if not isinstance(value, dict):
-        raise ValueError(f'{key} must be a mapping, got {type(value).__name__}{where}')
-    return value
-
-
-def _known(mapping, allowed, key, where):
-    unknown = sorted(str(k) for k in mapping if k not in allowed)
-    if unknown:
-        raise ValueError(f'unknown key(s) {unknown} in {key}; allowed: {list(allowed)}{where}')
-
-
-def _number(value, key, where, unit):
-    if isinstance(value, str):
-        # YAML 1.1 (PyYAML) reads '1.0e6' (no sign in the exponent) as a string.
-        try:
-            value = float(value)
-        except ValueError:
-            pass
-    if isinstance(value, bool) or not isinstance(value, (int, float)) \
-            or not math.isfinite(value):
-        raise ValueError(f'{key} must be a finite number {unit}, got {value!r}{where}')
-    return float(value)
-
-
-def _integer(value, key, low, high, where):
+def _integer(value, name, low, high):
     if isinstance(value, bool) or not hasattr(value, '__index__') \
             or not low <= int(value) <= high:
-        raise ValueError(f'{key} must be an integer in [{low}, {high}], got {value!r}{where}')
+        raise ValueError(f'`{name}` must be an integer in [{low}, {high}], got {value!r}')
     return int(value)
 
 
-def _register(value, key, where):
-    entry = _mapping(value, key, where)
-    _known(entry, _REGISTER_KEYS, key, where)
+def _register(value, where):
+    entry = where.mapping(value, _REGISTER_KEYS)
     if 'address' not in entry:
-        raise ValueError(f'{key}.address is missing{where}')
-    address = _integer(entry['address'], f'{key}.address', 0, 0xFFFF, where)
-    kind = entry.get('type', 'holding')
-    if kind not in REGISTER_TYPES:
-        raise ValueError(f'{key}.type must be one of {list(REGISTER_TYPES)}, got {kind!r}{where}')
+        raise (where / 'address').error('is missing')
+    address = (where / 'address').integer(entry['address'], 0, 0xFFFF)
+    kind = (where / 'type').choice(entry.get('type', 'holding'), REGISTER_TYPES)
     return Register(address=address, kind=kind)
 
 
-def _scaling(value, key, where):
-    entry = _mapping(value, key, where)
-    _known(entry, _SCALING_KEYS, key, where)
-    signed = entry.get('signed', False)
-    if not isinstance(signed, bool):
-        raise ValueError(f'{key}.signed must be true or false, got {signed!r}{where}')
+def _scaling(value, where):
+    entry = where.mapping(value, _SCALING_KEYS)
+    signed = (where / 'signed').boolean(entry.get('signed', False))
     low, high = (-0x8000, 0x7FFF) if signed else (0, 0xFFFF)
-    offset = _number(entry.get('offset_counts', 0), f'{key}.offset_counts', where, '[count]')
-    if not low <= offset <= high:
-        raise ValueError(f'{key}.offset_counts must be in [{low}, {high}], got {offset}{where}')
+    offset = (where / 'offset_counts').number(entry.get('offset_counts', 0), '[count]', low,
+                                              high)
     has_gain = 'counts_per_pa' in entry
     has_full_scale = 'full_scale_counts' in entry or 'full_scale_pa' in entry
     if has_gain == has_full_scale:
-        raise ValueError(f"{key} needs either 'counts_per_pa' or both 'full_scale_counts' and "
-                         f"'full_scale_pa', got keys {sorted(entry)}{where}")
+        raise where.error("needs either 'counts_per_pa' or both 'full_scale_counts' and "
+                          f"'full_scale_pa', got keys {', '.join(sorted(entry))}")
     if has_gain:
-        gain = _number(entry['counts_per_pa'], f'{key}.counts_per_pa', where, '[count/Pa]')
-        if gain <= 0.0:
-            raise ValueError(f'{key}.counts_per_pa must be > 0 [count/Pa], got {gain}{where}')
+        # At least one count per MAX_PRESSURE_PA: a gain below that cannot be a regulator.
+        gain = (where / 'counts_per_pa').number(entry['counts_per_pa'], '[count/Pa]',
+                                                1.0 / MAX_PRESSURE_PA, 0xFFFF)
         return Scaling(counts_per_pa=gain, offset_counts=offset, min_counts=low,
                        max_counts=high, signed=signed)
     for required in ('full_scale_counts', 'full_scale_pa'):
         if required not in entry:
-            raise ValueError(f'{key}.{required} is missing (full-scale scaling needs both '
-                             f"'full_scale_counts' and 'full_scale_pa'){where}")
-    counts = _integer(entry['full_scale_counts'], f'{key}.full_scale_counts', low, high, where)
-    span = _number(entry['full_scale_pa'], f'{key}.full_scale_pa', where, '[Pa]')
-    if span <= 0.0:
-        raise ValueError(f'{key}.full_scale_pa must be > 0 [Pa], got {span}{where}')
+            raise (where / required).error('is missing (full-scale scaling needs both '
+                                           "'full_scale_counts' and 'full_scale_pa')")
+    counts = (where / 'full_scale_counts').integer(entry['full_scale_counts'], low, high)
+    span = (where / 'full_scale_pa').number(entry['full_scale_pa'], '[Pa]', 0.0,
+                                            MAX_PRESSURE_PA, low_open=True)
     if counts <= offset:
-        raise ValueError(f'{key}.full_scale_counts must be > offset_counts ({offset}), '
-                         f'got {counts}{where}')
+        raise (where / 'full_scale_counts').error(f'must be > offset_counts ({offset:g}), '
+                                                  f'got {counts}')
     return Scaling(counts_per_pa=(counts - offset) / span, offset_counts=offset,
                    min_counts=int(math.ceil(offset)), max_counts=counts, signed=signed)

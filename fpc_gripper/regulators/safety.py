@@ -99,6 +99,29 @@ class SupervisorOutput:
         return self.mode in SAFE_MODES
 
 
+class MonotonicTime:
+    """
+    Map readings of a clock that may jump back onto a time that never does [s].
+
+    A backward jump counts as no time: later readings are shifted by the jump, so a
+    period measured across it (a watchdog, a retry interval) keeps running instead of
+    waiting for the clock to catch up. A forward jump counts as elapsed time, so it
+    can only make a watchdog expire early, towards the safe state.
+    """
+
+    def __init__(self):
+        self._last = None
+        self._shift = 0.0
+
+    def __call__(self, now):
+        """Return the mapped time of a clock reading `now` [s] (finite)."""
+        now = _check_time(now)
+        if self._last is not None and now + self._shift < self._last:
+            self._shift = self._last - now
+        self._last = now + self._shift
+        return self._last
+
+
 class ChannelSupervisor:
     """
     Guard one pressure channel between its command topic and its regulator.
@@ -108,8 +131,8 @@ class ChannelSupervisor:
     than ``command_timeout_s``, or a backend fault is reported, or
     :meth:`stop` is called, the setpoint goes to ``safe_state`` ('hold' keeps
     the last setpoint, 'vent' goes to 0 at once, without rate limit). Time is
-    always passed in (``now`` [s], any monotonic clock), so the class is a
-    deterministic function of its inputs.
+    always passed in (``now`` [s]), so the class is a deterministic function of its
+    inputs; a clock that jumps back counts as standing still (`MonotonicTime`).
 
     Parameters
     ----------
@@ -139,6 +162,8 @@ class ChannelSupervisor:
         self._last_command_time = None
         self._last_update_time = None
         self._fault = None
+        self._fault_vents = False
+        self._time = MonotonicTime()
 
     # -- configuration ----------------------------------------------------------------------
 
@@ -233,7 +258,7 @@ class ChannelSupervisor:
         value = float(pressure_pa_gauge)
         if not math.isfinite(value):
             raise ValueError(f'`pressure_pa_gauge` must be finite [Pa], got {pressure_pa_gauge!r}')
-        now = _check_time(now)
+        now = self._time(now)
         target = min(max(value, 0.0), self._max_pressure)
         clamped = target != value
         if self._fault is not None or self._mode == SupervisorMode.STOPPED:
@@ -243,27 +268,34 @@ class ChannelSupervisor:
         self._clamped = clamped
         self._last_command_time = now
         self._mode = SupervisorMode.TRACKING
+        self._fault_vents = False
         return CommandResult(accepted=True, clamped=clamped, target=target)
 
-    def report_fault(self, reason, now):
-        """Enter the safe state because the backend failed (``reason`` says how)."""
-        _check_time(now)
+    def report_fault(self, reason, now, vent=False):
+        """
+        Enter the safe state because the backend or the channel failed (``reason`` says how).
+
+        With ``vent`` the channel vents whatever ``safe_state`` says (over-pressure), and
+        stays vented until a fresh command is accepted.
+        """
+        self._time(now)
         self._fault = str(reason)
         self._mode = SupervisorMode.FAULT
+        self._fault_vents = self._fault_vents or bool(vent)
 
     def clear_fault(self, now):
         """Mark the backend healthy again; the safe state holds until the next command."""
-        _check_time(now)
+        self._time(now)
         self._fault = None
 
     def stop(self, now):
         """Enter the safe state on request (e.g. lifecycle deactivation)."""
-        _check_time(now)
+        self._time(now)
         self._mode = SupervisorMode.STOPPED
 
     def start(self, now):
         """Leave :attr:`SupervisorMode.STOPPED`; the setpoint is held until a command arrives."""
-        now = _check_time(now)
+        now = self._time(now)
         if self._mode == SupervisorMode.STOPPED:
             self._mode = SupervisorMode.FAULT if self._fault is not None else SupervisorMode.IDLE
         self._last_update_time = now
@@ -277,13 +309,13 @@ class ChannelSupervisor:
         Parameters
         ----------
         now : float
-            Current time [s]. A time earlier than the last update counts as no time.
+            Current time [s]. A clock that stepped back counts as standing still.
 
         Returns
         -------
         SupervisorOutput
         """
-        now = _check_time(now)
+        now = self._time(now)
         elapsed = 0.0 if self._last_update_time is None else max(
             0.0, now - self._last_update_time)
         self._last_update_time = now
@@ -292,7 +324,7 @@ class ChannelSupervisor:
         if self._mode == SupervisorMode.TRACKING and age > self._timeout:
             self._mode = SupervisorMode.WATCHDOG
         if self._mode in SAFE_MODES:
-            if self._safe_state == SafeState.VENT:
+            if self._safe_state == SafeState.VENT or self._fault_vents:
                 self._setpoint = 0.0
         elif self._mode == SupervisorMode.TRACKING:
             step = self._rate_limit * elapsed
@@ -304,7 +336,8 @@ class ChannelSupervisor:
                                 reason=self._reason(age))
 
     def _reason(self, age):
-        safe = f'safe state {self._safe_state.value} ({self._setpoint:.0f} Pa)'
+        mode = 'vent' if self._fault_vents else self._safe_state.value
+        safe = f'safe state {mode} ({self._setpoint:.0f} Pa)'
         if self._mode == SupervisorMode.IDLE:
             return 'waiting for a command'
         if self._mode == SupervisorMode.TRACKING:
@@ -317,8 +350,8 @@ class ChannelSupervisor:
                     f'{self._timeout:.3f} s; {safe}')
         if self._mode == SupervisorMode.FAULT:
             if self._fault is not None:
-                return f'backend fault: {self._fault}; {safe}'
-            return f'backend fault cleared, waiting for a fresh command; {safe}'
+                return f'fault: {self._fault}; {safe}'
+            return f'fault cleared, waiting for a fresh command; {safe}'
         return f'stopped; {safe}'
 
 

@@ -10,7 +10,7 @@ from fpc_gripper.regulators.base import BackendStatus
 from fpc_gripper.regulators.base import check_channel
 from fpc_gripper.regulators.base import check_pressure
 
-FAULT_KINDS = ('leak', 'stuck_sensor', 'disconnect')
+FAULT_KINDS = ('leak', 'stuck_sensor', 'bad_readback', 'disconnect')
 
 # Enough for the monotone walk through the at most six pieces of the vector field.
 _MAX_PIECES = 16
@@ -157,9 +157,10 @@ class SimulatedRegulator:
     -----
     Faults are injected with :meth:`inject_fault`: ``'leak'`` (an outflow of
     ``rate`` [Pa/s] the valve has to make up), ``'stuck_sensor'`` (the readback
-    freezes) and ``'disconnect'`` (every call but :meth:`status` and
-    :meth:`close` raises :class:`BackendFault`). Leak and stuck sensor are
-    silent, as on real hardware: :meth:`status` does not report them.
+    freezes), ``'bad_readback'`` (the readback is any float, NaN and over-range
+    included: a broken sensor or converter) and ``'disconnect'`` (every call but
+    :meth:`status` and :meth:`close` raises :class:`BackendFault`). All but the
+    disconnect are silent, as on real hardware: :meth:`status` does not report them.
     """
 
     def __init__(self, n_channels, time_constant_s=0.15, slew_rate_pa_s=2.0e6,
@@ -195,6 +196,7 @@ class SimulatedRegulator:
         self._setpoint = [0.0] * self.n_channels
         self._leak = [0.0] * self.n_channels
         self._stuck = [None] * self.n_channels
+        self._bad = [None] * self.n_channels
         self._disconnected = False
         self._connected = False
 
@@ -239,10 +241,17 @@ class SimulatedRegulator:
         self._check_usable()
         self._advance_to_now()
         variance = self.noise_std_pa ** 2 + self.lsb_pa ** 2 / 12.0
+        if self._bad[index] is not None:
+            return self._bad[index], variance
         if self._stuck[index] is not None:
             return self._stuck[index], variance
         noise = self._rng.normal(0.0, self.noise_std_pa) if self.noise_std_pa > 0.0 else 0.0
         return self._quantise(self._output[index] + noise), variance
+
+    def readback_range(self, channel):
+        """Return the (low, high) pressures the readback can represent [Pa gauge]."""
+        check_channel(channel, self.n_channels)
+        return 0.0, self.full_scale_pa
 
     def status(self):
         """Return the link state; leaks and stuck sensors are not visible here."""
@@ -263,15 +272,16 @@ class SimulatedRegulator:
 
         Parameters
         ----------
-        kind : {'leak', 'stuck_sensor', 'disconnect'}
+        kind : {'leak', 'stuck_sensor', 'bad_readback', 'disconnect'}
             Fault to inject.
         channel : int, optional
-            Affected channel (required for 'leak' and 'stuck_sensor').
+            Affected channel (required for all but 'disconnect').
         rate : float, optional
             Leak outflow [Pa/s], > 0 (required for 'leak').
         value : float, optional
-            Frozen readback [Pa gauge] for 'stuck_sensor'; default the noise-free,
-            quantised output at the moment of injection.
+            Frozen readback [Pa gauge] for 'stuck_sensor' (default the noise-free,
+            quantised output at the moment of injection); for 'bad_readback' the
+            value returned, any float (required).
         """
         if kind not in FAULT_KINDS:
             raise ValueError(f'`kind` must be one of {FAULT_KINDS}, got {kind!r}')
@@ -285,6 +295,10 @@ class SimulatedRegulator:
                 raise ValueError("`rate` [Pa/s] is required for kind='leak'")
             _check_positive('rate', rate, '[Pa/s]')
             self._leak[index] = float(rate)
+        elif kind == 'bad_readback':
+            if value is None:
+                raise ValueError("`value` [Pa] is required for kind='bad_readback'")
+            self._bad[index] = float(value)
         else:
             frozen = self._output[index] if value is None else check_pressure(value)
             self._stuck[index] = self._quantise(frozen)
@@ -294,6 +308,7 @@ class SimulatedRegulator:
         self._advance_to_now()
         self._leak = [0.0] * self.n_channels
         self._stuck = [None] * self.n_channels
+        self._bad = [None] * self.n_channels
         self._disconnected = False
 
     @property
@@ -305,9 +320,10 @@ class SimulatedRegulator:
         leaks = {i: r for i, r in enumerate(self._leak) if r > 0.0}
         if leaks:
             out['leak'] = leaks
-        stuck = {i: v for i, v in enumerate(self._stuck) if v is not None}
-        if stuck:
-            out['stuck_sensor'] = stuck
+        for kind, values in (('stuck_sensor', self._stuck), ('bad_readback', self._bad)):
+            chosen = {i: v for i, v in enumerate(values) if v is not None}
+            if chosen:
+                out[kind] = chosen
         return out
 
     def true_pressure(self, channel):

@@ -31,13 +31,13 @@ def write(tmp_path, text):
 @pytest.mark.parametrize('text, message', [
     ('fingers: [\n', 'malformed YAML'),
     ('- a\n', 'expected a mapping'),
-    ('fingers: []\n', 'non-empty list'),
+    ('fingers: []\n', 'fingers: must hold 1 to 16 finger mappings, got 0'),
     ('fingerz: []\n', 'unknown key.*fingerz'),
     ('fingers: [{name: f0, colour: red}]\n', r'fingers\[0\]: unknown key.*colour'),
     ('fingers: [{name: 0bad}]\n', 'valid ROS name'),
     ('fingers: [{name: a}, {name: a}]\n', 'unique'),
     ('fingers: [{name: a, design: {prestrain: 1.5}}]\n', 'prestrain'),
-    ('fingers: [{name: a, design: {Cq: 1}}]\n', 'unknown ActuatorDesign key.*Cq'),
+    ('fingers: [{name: a, design: {Cq: 1}}]\n', r"fingers\[0\]\.design: unknown key.*'Cq'"),
     ('palm_radius: -1\nfingers: [{name: a}]\n', 'palm_radius'),
     ('actuator: missing.yaml\nfingers: [{name: a}]\n', 'cannot read'),
 ])

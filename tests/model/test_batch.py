@@ -18,11 +18,12 @@ RTOL = 1e-12
 PRESSURES = (0.0, 100e3, 200e3, 300e3)
 FORCES = ((0.0, 0.0), (0.3, 0.0), (0.0, -0.2), (-0.1, 0.1))
 #: Per setting, an extra tip force [N] and why: 2 N lies beyond the error model's load
-#: range (the default model then takes the rod, which is not batched), and 1e4 N stalls
-#: the paper CCM's continuation.
+#: range (the default model then takes the rod, which is not batched), 5 N is the edge of
+#: the model's envelope, and (-3, 4) N stalls the SRM's continuation at prestrain 0.15.
 SETTINGS = {
     'default': (ModelSettings(), (0.0, -2.0)),
-    'paper': (ModelSettings(tolerance=0.0), (1e4, 0.0)),
+    'paper': (ModelSettings(tolerance=0.0), (5.0, 0.0)),
+    'srm': (ModelSettings(tolerance=0.0, n_segments=1), (-3.0, 4.0)),
     # A coarse tolerance takes the arc and CCM rungs of few segments; two of them break
     # the small-rotation rule at N = 2 and are refined by the single solve.
     'coarse': (ModelSettings(tolerance=2e-2), (0.0, -2.0)),
@@ -91,11 +92,11 @@ def test_grid_holds_the_cases_it_is_meant_to(grid, designs):
     labels = {model_label(result) for result in singles.values()}
     if name == 'default':
         assert {'rod', 'pcc N=22'} <= labels
-    if name == 'paper':
+    if name == 'srm':
         failed = [key for key, result in singles.items() if not result.success]
         assert failed and all(key[2] == len(forces) - 1 for key in failed)
         assert {singles[key].status for key in failed} == {SolverStatus.CONTINUATION_FAILED}
-        assert not out.success[..., -1].any()
+        assert not out.success[0, :, -1].any()
     if name == 'coarse':
         refined = [key for key, result in singles.items()
                    if result.model_choice.n_segments != finger_model(

@@ -5,8 +5,8 @@ import pathlib
 import numpy as np
 
 from fpc_gripper.model import ActuatorDesign, default_emc_coefficients, fit_emc_polynomial
-from fpc_gripper.model.design import safe_load_yaml
 from fpc_gripper.model.materials import DEFAULT_EMC_COEFFICIENTS
+from fpc_gripper.safe_yaml import parse_yaml
 
 #: Planar-tension neo-Hookean reference of SPEC "Materials": mu = E1/4 with E1 = 1.5 MPa.
 MU = 1.5e6 / 4.0
@@ -28,7 +28,7 @@ def test_default_is_the_source_constant():
 def test_shipped_yaml_holds_the_same_constants():
     # Both are decimal literals of the same doubles (repr precision), so they must agree
     # exactly: this keeps the two written copies from drifting apart.
-    coefficients = safe_load_yaml(SHIPPED.read_text())['emc_coefficients']
+    coefficients = parse_yaml(SHIPPED.read_text())['emc_coefficients']
     assert tuple(coefficients) == DEFAULT_EMC_COEFFICIENTS
 
 

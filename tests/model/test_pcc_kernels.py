@@ -211,9 +211,9 @@ def test_outputs_equal_numpy(states):
 
 @pytest.mark.parametrize('prestrain, pressure, force, n', [
     (0.40, 200e3, (0.0, 0.0), 24), (0.40, 200e3, (0.0, 1.0), 32), (0.25, 100e3, (0.0, 1.0), 24),
-    (0.25, 0.0, (-1.0, 0.5), 64), (0.15, 200e3, (-20.0, 0.0), 24)])
+    (0.25, 0.0, (-1.0, 0.5), 64), (0.15, 200e3, (-5.0, 0.0), 24)])
 def test_solves_equal_numpy(prestrain, pressure, force, n):
-    # The same Newton path: iterations equal, states to round-off (the last -20 N scene
+    # The same Newton path: iterations equal, states to round-off (the last -5 N scene
     # buckles through indefinite Hessians).
     design = ActuatorDesign.paper(prestrain)
     solver, reference = PCCSolver(design, n), ReferencePCCSolver(design, n)

@@ -323,11 +323,12 @@ def test_rejected_input_keeps_the_state_and_warns_until_an_accepted_one():
 
 
 def test_solver_failure_keeps_the_last_good_state_and_is_not_retried():
-    # One segment cannot carry 50 N pushing the tip along +Z: the continuation stalls.
+    # One segment cannot carry (-2.5, 4.3) N, back and up, inside the model's 5 N
+    # envelope: the continuation stalls.
     core, factory = make_core(solver_kwargs={'n_segments': 1})
     at_rest(core)
     good = core.fingers[2].result
-    core.offer_tip_force(2, 0.0, 50.0, 'finger_2', now_ns=1)
+    core.offer_tip_force(2, -2.5, 4.3, 'finger_2', now_ns=1)
     (update,) = core.process((2,), MS)
     assert update.result is None and not update.solved
     assert 'continuation' in update.failure
@@ -338,10 +339,10 @@ def test_solver_failure_keeps_the_last_good_state_and_is_not_retried():
     assert status.values['solver_message'] == update.failure
     assert 'keeping the last good state' in status.message
     assert status.values['tip_force'] == 'f0=0 N, p0=0 N'
-    assert status.values['input_tip_force'] == 'f0=0 N, p0=50 N'
+    assert status.values['input_tip_force'] == 'f0=-2.5 N, p0=4.3 N'
     calls = len(factory.calls)
     # The same input again from the same warm start would fail the same way: not re-solved.
-    core.offer_tip_force(2, 0.0, 50.0, 'finger_2', now_ns=2)
+    core.offer_tip_force(2, -2.5, 4.3, 'finger_2', now_ns=2)
     (again,) = core.process((2,), 100 * MS)
     assert again.failure == update.failure and len(factory.calls) == calls
     # A reachable input clears the error; at rest it is a state other fingers hold. (The
@@ -370,7 +371,7 @@ def test_solver_exception_is_a_failure():
 def test_invalid_state_is_published_with_a_warning():
     core, _ = make_core(solver_kwargs={'n_segments': 1})
     at_rest(core)
-    core.offer_tip_force(0, 0.0, -50.0, 'finger_0', now_ns=1)
+    core.offer_tip_force(0, 0.0, -1.0, 'finger_0', now_ns=1)
     (update,) = core.process((0,), MS)
     assert update.result is not None and not update.result.valid
     status = core.status(0)

@@ -214,7 +214,7 @@ def test_backend_fault_gives_error_diagnostics_and_the_safe_state(rig):
     r.spin_until(lambda: all(r.last_status(n).level == DiagnosticStatus.ERROR for n in FINGERS))
     for name in FINGERS:
         status = r.last_status(name)
-        assert 'backend fault' in status.message and values(status)['mode'] == 'fault'
+        assert 'fault: backend' in status.message and values(status)['mode'] == 'fault'
         assert float(values(status)['setpoint_pa_gauge']) == 0.0    # vented to 0.0: exact
     assert all(sup.mode in SAFE_MODES for sup in r.bridge.supervisors)
     sim.clear_faults()
@@ -223,6 +223,24 @@ def test_backend_fault_gives_error_diagnostics_and_the_safe_state(rig):
     r.command(FINGERS[0], ATM + 1.0e5)
     r.spin_until(lambda: r.last_status(FINGERS[0]).level == DiagnosticStatus.OK)
     r.spin_until(lambda: sim.setpoint(0) == pytest.approx(1.0e5, rel=0, abs=1e-6))
+
+
+def test_a_readback_that_is_not_a_measurement_is_never_published(rig):
+    r = rig(rate_limit_pa_s=1.0e7, command_timeout_s=5.0, diagnostics_rate_hz=20.0)
+    name, other = FINGERS[0], FINGERS[1]
+    r.command(name, ATM + 1.0e5)
+    r.spin_until(lambda: r.last_status(name) is not None
+                 and values(r.last_status(name))['mode'] == 'tracking')
+    r.bridge.backend.inject_fault('bad_readback', 0, value=math.nan)
+    r.spin_until(lambda: r.last_status(name).level == DiagnosticStatus.ERROR)
+    published, still = len(r.pressure[name]), len(r.pressure[other])
+    r.spin_for(0.3)
+    status = r.last_status(name)
+    assert 'not finite' in status.message and values(status)['mode'] == 'fault'
+    assert float(values(status)['setpoint_pa_gauge']) == 0.0        # vented to 0.0: exact
+    assert all(math.isfinite(m.fluid_pressure) for m in r.pressure[name])
+    assert len(r.pressure[name]) == published        # nothing more from the bad channel
+    assert len(r.pressure[other]) > still            # the other channels go on
 
 
 def test_out_of_range_parameters_are_refused_with_a_reason(rig):

@@ -1,15 +1,14 @@
 """Tests of the Modbus backend against an in-process pymodbus TCP server on 127.0.0.1."""
 
-import asyncio
 import copy
 import math
 import pathlib
 import subprocess
 import sys
-import threading
 
 from numpy.testing import assert_allclose
 import pytest
+from regulator_test_utils import Server
 import yaml
 
 from fpc_gripper.regulators.base import BackendFault
@@ -18,59 +17,17 @@ from fpc_gripper.regulators.factory import make_backend
 from fpc_gripper.regulators.modbus import ModbusRegulator
 from fpc_gripper.regulators.modbus import RegisterMap
 from fpc_gripper.regulators.sim import SimulatedRegulator
+from fpc_gripper.safe_yaml import parse_yaml
 
 EXAMPLE = pathlib.Path(__file__).resolve().parents[2] / 'msg_configs' / 'modbus_example.yaml'
 FC_HOLDING, FC_INPUT = 3, 4
-
-
-class Server:
-    """A pymodbus TCP server in its own thread and event loop (unit 1, 32 + 32 registers)."""
-
-    def __init__(self):
-        from pymodbus.server import ModbusTcpServer
-        from pymodbus.simulator import DataType
-        from pymodbus.simulator import SimData
-        from pymodbus.simulator import SimDevice
-
-        def bits():
-            return [SimData(0, count=16, values=False, datatype=DataType.BITS)]
-
-        def words():
-            return [SimData(0, count=32, values=0, datatype=DataType.REGISTERS)]
-
-        self.loop = asyncio.new_event_loop()
-        self.thread = threading.Thread(target=self.loop.run_forever, daemon=True)
-        self.thread.start()
-
-        async def start():
-            device = SimDevice(1, simdata=(bits(), bits(), words(), words()))
-            server = ModbusTcpServer(device, address=('127.0.0.1', 0))
-            await server.serve_forever(background=True)
-            return server
-
-        self.server = self.call(start())
-        self.port = self.server.transport.sockets[0].getsockname()[1]
-
-    def call(self, coroutine):
-        return asyncio.run_coroutine_threadsafe(coroutine, self.loop).result(timeout=5)
-
-    def get(self, function_code, address):
-        return self.call(self.server.async_getValues(1, function_code, address, 1))[0]
-
-    def put(self, function_code, address, value):
-        self.call(self.server.async_setValues(1, function_code, address, [value]))
-
-    def stop(self):
-        self.call(self.server.shutdown())
-        self.loop.call_soon_threadsafe(self.loop.stop)
-        self.thread.join(timeout=5)
 
 
 @pytest.fixture(scope='module')
 def server():
     srv = Server()
     yield srv
-    srv.stop()
+    srv.close()
 
 
 @pytest.fixture
@@ -146,7 +103,7 @@ def test_offset_signed_and_holding_readback(server):
 
 
 def test_exception_response_is_a_backend_fault_that_clears(server):
-    data = yaml.safe_load(EXAMPLE.read_text())
+    data = parse_yaml(EXAMPLE.read_text())
     data['channels'][0]['readback']['address'] = 500      # outside the device's registers
     reg = ModbusRegulator(RegisterMap.from_dict(data), host='127.0.0.1', port=server.port)
     reg.connect()
@@ -175,7 +132,7 @@ def test_unreachable_device_raises_backend_fault():
 
 
 def _mutate(path, value):
-    data = copy.deepcopy(yaml.safe_load(EXAMPLE.read_text()))
+    data = copy.deepcopy(parse_yaml(EXAMPLE.read_text()))
     node = data
     for key in path[:-1]:
         node = node[key]
@@ -190,18 +147,25 @@ _DELETE = object()
 
 
 @pytest.mark.parametrize('path, value, match', [
-    (('colour',), 'red', r"unknown key\(s\) \['colour'\] in the top level"),
-    (('channels', 1, 'readback'), _DELETE, r'channels\[1\]\.readback is missing'),
-    (('channels', 0, 'setpoint', 'type'), 'input', r'channels\[0\]\.setpoint\.type must be'),
-    (('channels', 2, 'readback', 'type'), 'coil', r'channels\[2\]\.readback\.type must be one of'),
-    (('channels', 0, 'setpoint', 'address'), 70000, r'channels\[0\]\.setpoint\.address'),
-    (('channels', 0, 'setpoint', 'adress'), 3, r"unknown key\(s\) \['adress'\]"),
-    (('scaling', 'counts_per_pa'), 0.004, r"scaling needs either 'counts_per_pa' or both"),
-    (('scaling', 'full_scale_pa'), -1.0, r'scaling\.full_scale_pa must be > 0 \[Pa\]'),
-    (('scaling', 'full_scale_pa'), _DELETE, r'scaling\.full_scale_pa is missing'),
-    (('connection', 'port'), 'http', r'connection\.port must be an integer'),
-    (('connection', 'unit'), 2, r"'device_id' or its alias 'unit', not both"),
-    (('channels',), [], r'channels must be a non-empty list'),
+    (('colour',), 'red', r"unknown key\(s\) 'colour'"),
+    (('channels', 1, 'readback'), _DELETE, r'channels\[1\]\.readback: is missing'),
+    (('channels', 0, 'setpoint', 'type'), 'input',
+     r"channels\[0\]\.setpoint\.type: must be 'holding'"),
+    (('channels', 2, 'readback', 'type'), 'coil',
+     r'channels\[2\]\.readback\.type: must be one of holding, input'),
+    (('channels', 0, 'setpoint', 'address'), 70000,
+     r'channels\[0\]\.setpoint\.address: must be an integer in \[0, 65535\], got 70000'),
+    (('channels', 0, 'setpoint', 'adress'), 3,
+     r"channels\[0\]\.setpoint: unknown key\(s\) 'adress'"),
+    (('scaling', 'counts_per_pa'), 0.004, r"scaling: needs either 'counts_per_pa' or both"),
+    (('scaling', 'full_scale_pa'), -1.0,
+     r'scaling\.full_scale_pa: must be in \(0, 1e\+08\] \[Pa\], got -1\.0'),
+    (('scaling', 'full_scale_pa'), _DELETE, r'scaling\.full_scale_pa: is missing'),
+    (('connection', 'port'), 'http', r'connection\.port: must be an integer in \[1, 65535\]'),
+    (('connection', 'unit'), 2, r"connection: give 'device_id' or its alias 'unit', not both"),
+    (('channels',), [], r'channels: must hold 1 to 64 channel mappings, got 0'),
+    (('channels', 0, 'name'), 'x' * 65, r'channels\[0\]\.name: must be at most 64 characters'),
+    (('connection', 'timeout_s'), 1.0e9, r'connection\.timeout_s: must be in \(0, 60\] \[s\]'),
 ])
 def test_bad_register_maps_name_the_key(tmp_path, path, value, match):
     bad = tmp_path / 'bad.yaml'
@@ -214,12 +178,12 @@ def test_bad_register_maps_name_the_key(tmp_path, path, value, match):
 def test_malformed_yaml_and_missing_file(tmp_path):
     bad = tmp_path / 'broken.yaml'
     bad.write_text('channels: [\n  {setpoint: ')
-    with pytest.raises(ValueError, match='not valid YAML'):
+    with pytest.raises(ValueError, match='malformed YAML'):
         RegisterMap.from_yaml(bad)
-    with pytest.raises(ValueError, match='cannot be read'):
+    with pytest.raises(ValueError, match='cannot read Modbus register map'):
         RegisterMap.from_yaml(tmp_path / 'absent.yaml')
     bad.write_text('- 1\n- 2\n')
-    with pytest.raises(ValueError, match='the document must be a mapping'):
+    with pytest.raises(ValueError, match='expected a mapping'):
         RegisterMap.from_yaml(bad)
 
 

@@ -5,21 +5,12 @@ import math
 import numpy as np
 from numpy.testing import assert_allclose
 import pytest
+from regulator_test_utils import FakeClock
 from scipy.integrate import solve_ivp
 
 from fpc_gripper.regulators.base import BackendFault
 from fpc_gripper.regulators.base import RegulatorBackend
 from fpc_gripper.regulators.sim import SimulatedRegulator
-
-
-class FakeClock:
-    """A clock the test advances by hand [s]."""
-
-    def __init__(self, start=100.0):
-        self.now = start
-
-    def __call__(self):
-        return self.now
 
 
 def make(clock, **kwargs):
@@ -263,7 +254,7 @@ def test_bad_calls_are_named():
         sim.set_pressure(3, 1.0)
     with pytest.raises(ValueError, match='pressure_pa_gauge'):
         sim.set_pressure(0, math.nan)
-    with pytest.raises(ValueError, match="'leak', 'stuck_sensor', 'disconnect'"):
+    with pytest.raises(ValueError, match="'leak', 'stuck_sensor', 'bad_readback', 'disconnect'"):
         sim.inject_fault('burst', 0)
     with pytest.raises(ValueError, match='rate'):
         sim.inject_fault('leak', 0)
