@@ -1,10 +1,14 @@
 """Many independent scenes at once: designs x pressures x tip forces on the compiled engine."""
 
+import functools
+
+import numba
 import numpy as np
 
-from . import engine
+from . import engine, shape_kernels
 from .analysis import flexural_rigidity
 from .design import ActuatorDesign
+from .pcc import PCCSolver
 from .pipeline import finger_model, model_label, ModelSettings, rung_label, solver_label
 from .selection import AdaptiveSolver
 from .solver import AXES, CCMResult, CCMSolver, check_rigidity, rigidity_result, SolverStatus
@@ -117,6 +121,10 @@ class GridResult:
         Global (X, Z) of the tip [m].
     models : ndarray of str, shape (D, P, F)
         Model of every scene, as `pipeline.model_label` names it.
+    curvature, fit_rmsd : ndarray, shape (D, P, F)
+        Signed curvature [1/m] and RMSD [m] of every scene's circle fit, equal to its
+        result's `curvature` and `fit_rmsd` (the same samples and fit, compiled over
+        both cores); computed on first use.
 
     """
 
@@ -159,6 +167,51 @@ class GridResult:
         self.models[scene] = model_label(result)
         self._singles[scene] = result
         self._batch[scene] = -1
+
+    @functools.cached_property
+    def _circles(self):
+        """(curvature, rmsd), shape (D, P, F) each: every scene's samples and circle fit."""
+        out = np.full((self._batch.size, 2), np.nan)
+        for b, (batch, solvers, slots, loaded) in enumerate(self._batches):
+            scenes = np.flatnonzero(self._batch == b)
+            if scenes.size:
+                out[scenes] = self._batch_circles(scenes, batch, solvers, slots)
+        for scene, result in self._singles.items():
+            out[scene] = result.curvature, result.fit_rmsd
+        return out[:, 0].reshape(self.shape), out[:, 1].reshape(self.shape)
+
+    def _batch_circles(self, scenes, batch, solvers, slots):
+        """Circle fits (S, 2) of a batch's scenes: compiled for the CCM and the PCC."""
+        rows = self._row[scenes]
+        solver = solvers[0]
+        if isinstance(solver, CCMSolver) and all(
+                s.samples_per_segment == solver.samples_per_segment for s in solvers):
+            lengths = np.array([s.segments.lengths for s in solvers])
+            return shape_kernels.ccm_circles(batch.states[rows], lengths, slots[rows],
+                                             solver.samples_per_segment)
+        if isinstance(solver, PCCSolver):
+            _, p, f = np.unravel_index(scenes, self.shape)
+            datas = numba.typed.List([s.kernel_data(False) for s in solvers])
+            return shape_kernels.pcc_circles(
+                batch.states[rows], datas, np.array([s._sample_segment for s in solvers]),
+                np.array([s._sample_offset for s in solvers]), slots[rows],
+                self.pressures[p], np.ascontiguousarray(self.tip_forces[f]))
+        # Another discretisation: each scene's own result.
+        out = np.empty((scenes.size, 2))
+        for k, scene in enumerate(scenes):
+            result = self.result(*np.unravel_index(scene, self.shape))
+            out[k] = result.curvature, result.fit_rmsd
+        return out
+
+    @property
+    def curvature(self):
+        """Signed circle-fit curvature of every scene [1/m], shape (D, P, F)."""
+        return self._circles[0]
+
+    @property
+    def fit_rmsd(self):
+        """RMSD of every scene's samples from its circle [m], shape (D, P, F)."""
+        return self._circles[1]
 
     def result(self, design, pressure, force=0):
         """
