@@ -16,7 +16,9 @@ setup(
         ('share/' + package_name, ['package.xml']),
         ('share/' + package_name + '/msg_configs', glob('msg_configs/*.yaml')),
     ],
-    install_requires=['setuptools', 'numpy', 'scipy', 'numba', 'PyYAML'],
+    install_requires=['setuptools', 'numpy', 'scipy', 'numba', 'PyYAML', 'pandas', 'tqdm'],
+    # fpc-design: sweeps on a Dask cluster (--scheduler), parquet tables (--format parquet).
+    extras_require={'dask': ['dask', 'distributed'], 'parquet': ['pyarrow']},
     zip_safe=True,
     maintainer='fpc_gripper developers',
     maintainer_email='dev@fpc-gripper.invalid',
@@ -31,6 +33,7 @@ setup(
             'gripper_controller = fpc_gripper.nodes.gripper_controller:main',
             'gripper_demo = fpc_gripper.nodes.gripper_demo:main',
             'fpc-mcap = fpc_gripper.io.cli:main',
+            'fpc-design = fpc_gripper.design.cli:main',
         ],
     },
 )

@@ -125,6 +125,8 @@ class GridResult:
         Signed curvature [1/m] and RMSD [m] of every scene's circle fit, equal to its
         result's `curvature` and `fit_rmsd` (the same samples and fit, compiled over
         both cores); computed on first use.
+    valid : ndarray of bool, shape (D, P, F)
+        Every scene's result's `valid` (the CCM's small-rotation rule).
 
     """
 
@@ -202,6 +204,23 @@ class GridResult:
             result = self.result(*np.unravel_index(scene, self.shape))
             out[k] = result.curvature, result.fit_rmsd
         return out
+
+    @functools.cached_property
+    def valid(self):
+        """
+        Whether every scene's state obeys its model's small-rotation rule, shape (D, P, F).
+
+        As each result's `valid`: |2 d L_i| < 1 in every CCM segment; always True for the
+        geometrically exact rungs.
+        """
+        out = np.ones(self._batch.size, dtype=bool)
+        for b, (batch, solvers, _, _) in enumerate(self._batches):
+            scenes = np.flatnonzero(self._batch == b)
+            if scenes.size and isinstance(solvers[0], CCMSolver):
+                out[scenes] = CCMResult.small_rotations(batch.states[self._row[scenes]])
+        for scene, result in self._singles.items():
+            out[scene] = result.valid
+        return out.reshape(self.shape)
 
     @property
     def curvature(self):

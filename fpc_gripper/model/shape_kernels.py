@@ -127,7 +127,7 @@ def _pratt(x, z, r2):
 
 @_jit
 def _minor3(k, row, col):
-    """Determinant of the 3 x 3 matrix left when `row` and `col` are struck from 4 x 4 k."""
+    """Return the determinant of 4 x 4 k with `row` and `col` struck out (a 3 x 3 minor)."""
     rows = np.empty(3, dtype=np.int64)
     cols = np.empty(3, dtype=np.int64)
     a = b = 0
