@@ -115,7 +115,7 @@ def _run_arguments(parser, scheduler=True):
 
 def _settings(args):
     from fpc_gripper.model.pipeline import DEFAULT_N_SEGMENTS, ModelSettings
-    from .sweep import model_settings
+    from .parametric import model_settings
     if args.segments is not None and args.model != 'paper':
         raise ValueError('--segments applies to --model paper only')
     fields = {}
@@ -130,7 +130,7 @@ def _sweep(args, out, err):
     from .charts import sweep_charts, write_table
     from .grid import base_design, parse_assignment, parse_values
     from .runner import dask_available, DASK_HINT
-    from .sweep import sweep
+    from .parametric import sweep
     out_dir = pathlib.Path(args.out)
     design = base_design(args.design)
     start = time.perf_counter()
@@ -168,7 +168,7 @@ def _sweep(args, out, err):
 
 def _optimize(args, out, err):
     from .grid import base_design, parse_values
-    from .optimize import optimize, Targets, write_outputs
+    from .inverse import optimize, Targets, write_outputs
     targets = Targets(closed_aperture=args.closed_aperture, open_aperture=args.open_aperture,
                       pressure_budget=args.pressure_budget, kx=args.kx,
                       tip_force=args.tip_force, at_aperture=args.at_aperture,

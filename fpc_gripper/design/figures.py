@@ -7,7 +7,7 @@ import numpy as np
 from fpc_gripper.model.pipeline import finger_model, ModelSettings
 from .charts import pyplot, save_figure, write_table
 from .grid import base_design
-from .sweep import model_settings, sweep
+from .parametric import model_settings, sweep
 
 __all__ = ['FIGURES', 'PAPER_PRESSURES', 'figure']
 

@@ -106,9 +106,10 @@ def _client(scheduler):
         return
     # Single-threaded workers; each task's compiled loops share the cores between them.
     threads = max(1, (os.cpu_count() or 1) // workers)
-    # Quiet: a closing cluster logs its workers' last heartbeats as errors.
+    # Quiet: a closing cluster logs its workers' last heartbeats as errors. Its HTTP
+    # server (health, and the dashboard where bokeh is installed) takes a free port.
     with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                      host='127.0.0.1', dashboard_address=None,
+                      host='127.0.0.1', dashboard_address=':0',
                       silence_logs=logging.CRITICAL) as cluster, \
             Client(cluster) as client:
         yield client, threads

@@ -11,7 +11,7 @@ from fpc_gripper.model import batch
 from fpc_gripper.model.kinematics import consistent_strain_map, from_scaled
 from fpc_gripper.model.pipeline import finger_model
 from .grid import base_design
-from .sweep import model_settings
+from .parametric import model_settings
 
 __all__ = ['Targets', 'DesignSearch', 'optimize', 'peak_strain', 'write_outputs',
            'PARAMETERS', 'default_bounds']
