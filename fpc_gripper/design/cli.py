@@ -107,7 +107,8 @@ def _run_arguments(parser, scheduler=True):
                             help="Dask: 'local:N' (a LocalCluster of N workers) or "
                                  "'tcp://host:port' (needs fpc_gripper[dask])")
         parser.add_argument('--chunk', type=int, default=None, metavar='DESIGNS',
-                            help='designs per task (default: about 16 tasks)')
+                            help='designs per task (default: about 16 tasks on Dask or with '
+                                 'a progress bar, else one batch); never changes a row')
     parser.add_argument('--progress', dest='progress', action='store_true', default=None,
                         help='always show the progress bar (default: on a terminal)')
     parser.add_argument('--no-progress', dest='progress', action='store_false')

@@ -8,7 +8,7 @@ from fpc_gripper.model import batch
 from fpc_gripper.model.pipeline import DEFAULT_N_SEGMENTS, ModelSettings
 from fpc_gripper.model.solver import SolverStatus
 from .grid import base_design, DEFAULT_PRESSURES, design_grid
-from .runner import run_chunks
+from .runner import run_chunks, shows_progress
 
 __all__ = ['sweep', 'model_settings', 'settings_label', 'check_pressures', 'solve_designs',
            'MODELS', 'STATUS_OK', 'STATUS_INVALID', 'STATUS_SMALL_ROTATION', 'STATUS_RIGIDITY']
@@ -24,6 +24,8 @@ STATUS_SMALL_ROTATION = 'small_rotation'
 #: `status` of a row whose equilibrium is fine but whose K_x or K_z was not found.
 STATUS_RIGIDITY = 'rigidity_failed'
 _SOLVER_STATUS = {int(s): s.name.lower() for s in SolverStatus}
+#: Tasks of a Dask run, or steps of a progress bar, when the caller does not say.
+_CHUNKS = 16
 
 
 def model_settings(model='default'):
@@ -180,7 +182,8 @@ def sweep(vary=None, pressures=None, design=None, model='default', rigidity=Fals
         None: this process (compiled loops on every core). ``'local:N'`` or
         ``'tcp://host:port'``: Dask (`runner.run_chunks`; needs ``fpc_gripper[dask]``).
     chunk_designs : int, optional
-        Designs per task (default: about 16 tasks). Any chunking gives the same rows.
+        Designs per task. Default: about 16 tasks on Dask or with a progress bar, else one
+        batch of every design. Any chunking gives the same rows.
     progress : bool, optional
         Progress bar on stderr for runs over a second (default: when it is a terminal).
 
@@ -211,7 +214,13 @@ def sweep(vary=None, pressures=None, design=None, model='default', rigidity=Fals
         raise ValueError(f'`displacement` must be finite and > 0 [m], got {displacement!r}')
     axes = _rigidity_axes(rigidity)
     columns, points = design_grid(base, vary, scale_w1)
-    size = max(1, math.ceil(len(points) / 16)) if chunk_designs is None else int(chunk_designs)
+    if chunk_designs is None:
+        # One batch is fastest (designs of one discretisation and options share compiled
+        # loops); tasks for Dask and for a progress bar. No chunking changes a row.
+        whole = scheduler is None and not shows_progress(progress)
+        size = len(points) if whole else max(1, math.ceil(len(points) / _CHUNKS))
+    else:
+        size = int(chunk_designs)
     if size < 1:
         raise ValueError(f'`chunk_designs` must be >= 1, got {chunk_designs!r}')
     entries = [(p.design, p.error) for p in points]

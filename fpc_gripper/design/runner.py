@@ -5,7 +5,7 @@ import logging
 import os
 import sys
 
-__all__ = ['run_chunks', 'dask_available', 'DASK_HINT']
+__all__ = ['run_chunks', 'dask_available', 'shows_progress', 'DASK_HINT']
 
 #: How to get the optional Dask extra.
 DASK_HINT = "install the Dask extra (pip install 'fpc_gripper[dask]') to run on a cluster"
@@ -23,10 +23,15 @@ def dask_available():
     return True
 
 
+def shows_progress(progress):
+    """Whether a run shows its progress bar: as asked, else when stderr is a terminal."""
+    return sys.stderr.isatty() if progress is None else bool(progress)
+
+
 def _bar(total, progress, unit):
     from tqdm.auto import tqdm
-    show = sys.stderr.isatty() if progress is None else bool(progress)
-    return tqdm(total=total, unit=unit, disable=not show, delay=_PROGRESS_DELAY, leave=False)
+    return tqdm(total=total, unit=unit, disable=not shows_progress(progress),
+                delay=_PROGRESS_DELAY, leave=False)
 
 
 def run_chunks(function, chunks, weights=None, scheduler=None, progress=None, unit='design'):
