@@ -120,7 +120,7 @@ def local_rows(repeats):
 
 
 def dask_rows(repeats, local):
-    """The grid on a 2-worker LocalCluster: wall time with and without start-up, overhead."""
+    """Time the grid on a 2-worker LocalCluster, with and without start-up, against local."""
     import distributed
     out = {}
     for kx in (False, True):

@@ -10,7 +10,7 @@ from fpc_gripper.model.solver import SolverStatus
 from .grid import base_design, DEFAULT_PRESSURES, design_grid
 from .runner import run_chunks, shows_progress
 
-__all__ = ['sweep', 'model_settings', 'settings_label', 'check_pressures', 'solve_designs',
+__all__ = ['sweep', 'model_settings', 'settings_label', 'solve_designs',
            'MODELS', 'STATUS_OK', 'STATUS_INVALID', 'STATUS_SMALL_ROTATION', 'STATUS_RIGIDITY']
 
 #: Model names of the command line: the default pipeline model, or the paper's CCM8.
@@ -49,20 +49,6 @@ def settings_label(settings):
     if settings.tolerance > 0.0:
         return f'default ({settings.tolerance * 1e3:g} mm)'
     return f'paper CCM{settings.n_segments}'
-
-
-def check_pressures(pressures):
-    """Return gauge pressures as a 1-d float array; ValueError naming bad ones [Pa]."""
-    values = np.atleast_1d(np.asarray(DEFAULT_PRESSURES if pressures is None else pressures,
-                                      dtype=float))
-    if values.ndim != 1 or not values.size:
-        raise ValueError(f'`pressures` must be a non-empty 1-d sequence [Pa], got shape '
-                         f'{values.shape}')
-    bad = ~(np.isfinite(values) & (values >= 0.0))
-    if bad.any():
-        raise ValueError(f'`pressures` must be finite and >= 0 (gauge) [Pa], got '
-                         f'{values[bad][0]!r}')
-    return values
 
 
 def solve_designs(designs, pressures, settings, rigidity=(), displacement=0.010):
@@ -207,7 +193,7 @@ def sweep(vary=None, pressures=None, design=None, model='default', rigidity=Fals
     import pandas as pd
     base = base_design(design)
     settings = model_settings(model)
-    pressures = check_pressures(pressures)
+    pressures = batch.check_pressures(DEFAULT_PRESSURES if pressures is None else pressures)
     if isinstance(displacement, bool) or not (isinstance(displacement, (int, float))
                                               and math.isfinite(displacement)
                                               and displacement > 0.0):

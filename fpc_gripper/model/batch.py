@@ -13,7 +13,7 @@ from .pipeline import finger_model, model_label, ModelSettings, rung_label, solv
 from .selection import AdaptiveSolver
 from .solver import AXES, CCMResult, CCMSolver, check_rigidity, rigidity_result, SolverStatus
 
-__all__ = ['solve_grid', 'rigidity_grid', 'GridResult', 'RigidityGrid']
+__all__ = ['solve_grid', 'rigidity_grid', 'GridResult', 'RigidityGrid', 'check_pressures']
 
 
 def _designs(designs):
@@ -27,7 +27,8 @@ def _designs(designs):
     return designs
 
 
-def _pressures(pressures):
+def check_pressures(pressures):
+    """Return gauge pressures as a 1-d float array; ValueError naming a bad one [Pa]."""
     values = np.atleast_1d(np.asarray(pressures, dtype=float))
     if values.ndim != 1 or not values.size:
         raise ValueError(f'`pressures` must be a non-empty 1-d sequence [Pa], got shape '
@@ -302,7 +303,7 @@ def solve_grid(designs, pressures, tip_forces=((0.0, 0.0),), settings=ModelSetti
 
     """
     designs = _designs(designs)
-    pressures = _pressures(pressures)
+    pressures = check_pressures(pressures)
     forces = _tip_forces(tip_forces)
     settings = _settings(settings)
     out = GridResult(designs, pressures, forces, settings)
@@ -454,7 +455,7 @@ def rigidity_grid(designs, pressures, axis='x', displacement=0.010, settings=Mod
 
     """
     designs = _designs(designs)
-    pressures = _pressures(pressures)
+    pressures = check_pressures(pressures)
     delta = check_rigidity(axis, displacement)
     settings = _settings(settings)
     out = RigidityGrid(designs, pressures, axis, delta)

@@ -5,8 +5,7 @@ import math
 import numba
 import numpy as np
 
-from . import kernels
-from . import pcc_kernels
+from . import arc_kernels, kernels, pcc_kernels
 from .engine import _cached
 
 __all__ = ['signed_distances', 'distance_jacobian', 'circle_fit', 'ccm_samples',
@@ -171,32 +170,10 @@ def _solve3(h, g, lam):
     a = h.copy()
     for i in range(3):
         a[i, i] += lam * max(h[i, i], 1e-300)
-    low = np.zeros((3, 3))
-    for j in range(3):
-        total = a[j, j]
-        for k in range(j):
-            total -= low[j, k] * low[j, k]
-        if not total > 0.0:
-            return np.full(3, np.nan)
-        low[j, j] = math.sqrt(total)
-        for i in range(j + 1, 3):
-            total = a[i, j]
-            for k in range(j):
-                total -= low[i, k] * low[j, k]
-            low[i, j] = total / low[j, j]
-    y = np.empty(3)
-    for i in range(3):
-        total = -g[i]
-        for k in range(i):
-            total -= low[i, k] * y[k]
-        y[i] = total / low[i, i]
-    out = np.empty(3)
-    for i in range(2, -1, -1):
-        total = y[i]
-        for k in range(i + 1, 3):
-            total -= low[k, i] * out[k]
-        out[i] = total / low[i, i]
-    return out
+    low, definite = arc_kernels._cholesky3(a)
+    if not definite:
+        return np.full(3, np.nan)
+    return arc_kernels._substitute3(low, -g)
 
 
 @_jit
@@ -245,33 +222,38 @@ def _levenberg_marquardt(params, x, z, r2):
     step below `_GAUSS_NEWTON` is taken undamped, since there the cost changes by less
     than its own round-off and only Gauss-Newton's quadratic convergence still tells.
     Stops once a step is below `_LM_XTOL`. (`signed_distances` and `distance_jacobian`
-    are the same formulas, one point at a time.)
+    are the same formulas, one point at a time.) One evaluation and one solve per pass.
     """
     h = np.empty((3, 3))
     g = np.empty(3)
     h_trial = np.empty((3, 3))
     g_trial = np.empty(3)
-    cost = _normal_equations(params, x, z, r2, h, g)
+    trial = params.copy()
+    cost = np.inf
+    size = np.inf
     lam = 1e-3
     for _ in range(_LM_ITERATIONS):
-        while True:
-            step = _solve3(h, g, lam)
-            size = np.abs(step).max()
-            if not np.isfinite(size):
-                return params
-            trial = params + step
-            cost_trial = _normal_equations(trial, x, z, r2, h_trial, g_trial)
-            if cost_trial <= cost or size <= _GAUSS_NEWTON:
-                params, cost = trial, cost_trial
-                h[:, :] = h_trial
-                g[:] = g_trial
-                lam = max(0.1 * lam, 1e-12)
+        cost_trial = _normal_equations(trial, x, z, r2, h_trial, g_trial)
+        if cost_trial <= cost or size <= _GAUSS_NEWTON:
+            # Swap the buffers (a slice copy would cost seconds of compile).
+            params, cost = trial, cost_trial
+            h, h_trial = h_trial, h
+            g, g_trial = g_trial, g
+            lam = max(0.1 * lam, 1e-12)
+            if size <= _LM_XTOL:
                 break
+        elif cost == np.inf:
+            # Not finite where it starts: nothing to refine.
+            break
+        else:
             lam *= 10.0
             if not lam < 1e16:
-                return params
-        if size <= _LM_XTOL:
-            return params
+                break
+        step = _solve3(h, g, lam)
+        size = max(abs(step[0]), abs(step[1]), abs(step[2]))
+        if not size < np.inf:
+            break
+        trial = params + step
     return params
 
 
@@ -292,12 +274,13 @@ def circle_fit(points):
     docs/physics.md, section 9.
     """
     n = points.shape[0]
-    if not np.all(np.isfinite(points)):
-        return np.nan, np.nan, np.nan, np.nan
     cx = cz = 0.0
     for k in range(n):
         cx += points[k, 0]
         cz += points[k, 1]
+    if not (abs(cx) < np.inf and abs(cz) < np.inf):
+        # A non-finite sample (NaN or inf) makes a sum non-finite.
+        return np.nan, np.nan, np.nan, np.nan
     cx /= n
     cz /= n
     scale = 0.0
@@ -319,6 +302,9 @@ def circle_fit(points):
     u = math.sqrt(max(1.0 + 4.0 * a * d, 0.0))
     b, c = u * math.cos(phi), u * math.sin(phi)
     dist = signed_distances(params, x, z, r2)
+    square = 0.0
+    for k in range(n):
+        square += dist[k] * dist[k]
     # Orient the implicit function so that its gradient at the first point is on the left
     # of the direction of travel; then A > 0 exactly for clockwise turning.
     tx, tz = x[1] - x[0], z[1] - z[0]
@@ -329,7 +315,7 @@ def circle_fit(points):
         center_z = cz + scale * (-c / (2.0 * a))
     else:
         center_x = center_z = np.inf
-    return 2.0 * a / scale, scale * math.sqrt(np.dot(dist, dist) / n), center_x, center_z
+    return 2.0 * a / scale, scale * math.sqrt(square / n), center_x, center_z
 
 
 # -- midplane samples of the CCM ------------------------------------------------------------

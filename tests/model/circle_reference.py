@@ -1,10 +1,10 @@
 """Reference circle fit with scipy (generalised eigenproblem, MINPACK LM), as before numba."""
 
-from dataclasses import dataclass
-
 import numpy as np
 from scipy.linalg import eig
 from scipy.optimize import least_squares
+
+from fpc_gripper.model.analysis import CircleFit
 
 __all__ = ['CircleFit', 'fit_circle']
 
@@ -13,28 +13,6 @@ _PRATT = np.array([[0.0, 0.0, 0.0, -2.0],
                    [0.0, 1.0, 0.0, 0.0],
                    [0.0, 0.0, 1.0, 0.0],
                    [-2.0, 0.0, 0.0, 0.0]])
-
-
-@dataclass(frozen=True)
-class CircleFit:
-    """
-    Result of an orthogonal-distance circle fit.
-
-    Attributes
-    ----------
-    curvature : float
-        Signed curvature [1/m], > 0 when the path turns clockwise in (X, Z),
-        that is when a finger leaving along +X curls towards -Z.
-    rmsd : float
-        Root-mean-square orthogonal distance of the points to the circle [m].
-    center : ndarray, shape (2,)
-        Circle centre [m]; infinite for a straight line.
-
-    """
-
-    curvature: float
-    rmsd: float
-    center: np.ndarray
 
 
 def _signed_distances(params, x, z, r2):
