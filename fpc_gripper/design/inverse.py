@@ -238,7 +238,11 @@ class DesignSearch:
                                   for p in range(self.pressures.size))
         model = finger_model(design, self.settings)
         if t.kx is not None:
-            m['kx'], m['kx_pressure'] = self._kx_at(model, curve, t.at_aperture)
+            try:
+                m['kx'], m['kx_pressure'] = self._kx_at(model, curve, t.at_aperture)
+            except ValueError:
+                # A solve failed inside the bracket: no trustworthy K_x, an infeasible design.
+                return None
         if t.tip_force is not None:
             gap = (t.at_aperture / 2.0 - self.palm_radius) - grid.tip[j, 0, 0, 1]
             force = 0.0
