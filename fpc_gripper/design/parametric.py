@@ -26,8 +26,6 @@ STATUS_RIGIDITY = 'rigidity_failed'
 _SOLVER_STATUS = {int(s): s.name.lower() for s in SolverStatus}
 #: Tasks of a Dask run, or steps of a progress bar, when the caller does not say.
 _CHUNKS = 16
-#: Designs solved together (below `pipeline.finger_model`'s cache of 32 fingers).
-_BLOCK = 16
 
 
 def model_settings(model='default'):
@@ -59,9 +57,10 @@ def solve_designs(designs, pressures, settings, rigidity=(), displacement=0.010)
 
     Invalid designs (None, with their message) give rows of NaN with their status. The
     valid ones are solved together on the batched engine (`batch.solve_grid`, curvature
-    by the compiled circle fit; `batch.rigidity_grid` along +X and +Z; with rigidity in
-    blocks of 16 designs), every scene cold, so a row does not depend on which other
-    designs share its call.
+    by the compiled circle fit; `batch.rigidity_grid` along +X and +Z), every scene cold,
+    so a row does not depend on which other designs share its call. (Smaller blocks,
+    which would keep `finger_model`'s cache of 32 fingers warm from one call to the next,
+    measured slower: a compiled batch per design geometry costs more than a rebuild.)
 
     Parameters
     ----------
@@ -95,12 +94,8 @@ def solve_designs(designs, pressures, settings, rigidity=(), displacement=0.010)
     for k, (design, error) in enumerate(designs):
         if design is None:
             out['message'][k * n_p:(k + 1) * n_p] = error
-    # With rigidity, blocks small enough that `pipeline.finger_model`'s cache keeps their
-    # models from the equilibria to the rigidity solves (else each is built twice).
-    block = _BLOCK if rigidity else max(len(valid), 1)
-    for start in range(0, len(valid), block):
-        _solve_block(out, designs, valid[start:start + block], pressures, settings, rigidity,
-                     displacement)
+    if valid:
+        _solve_block(out, designs, valid, pressures, settings, rigidity, displacement)
     return out
 
 
