@@ -18,7 +18,9 @@ setup(
         ('share/' + package_name + '/launch', glob('launch/*.launch.py')),
         ('share/' + package_name + '/config', glob('config/*.yaml')),
     ],
-    install_requires=['setuptools', 'numpy', 'scipy', 'numba', 'PyYAML'],
+    install_requires=['setuptools', 'numpy', 'scipy', 'numba', 'PyYAML', 'pandas', 'tqdm'],
+    # fpc-design: sweeps on a Dask cluster (--scheduler), parquet tables (--format parquet).
+    extras_require={'dask': ['dask', 'distributed'], 'parquet': ['pyarrow']},
     zip_safe=True,
     maintainer='fpc_gripper developers',
     maintainer_email='dev@fpc-gripper.invalid',
@@ -35,6 +37,7 @@ setup(
             'fpc-mcap = fpc_gripper.io.cli:main',
             'fpc-calibrate = fpc_gripper.calibration.cli:main',
             'fpc-grasp = fpc_gripper.grasp.cli:main',
+            'fpc-design = fpc_gripper.design.cli:main',
         ],
     },
 )

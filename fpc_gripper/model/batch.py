@@ -1,16 +1,20 @@
 """Many independent scenes at once: designs x pressures x tip forces on the compiled engine."""
 
+import functools
+
+import numba
 import numpy as np
 
-from . import engine
+from . import engine, shape_kernels
 from .analysis import flexural_rigidity
 from .design import ActuatorDesign
+from .pcc import PCCSolver
 from .pipeline import finger_model, model_label, ModelSettings, rung_label, solver_label
 from .selection import AdaptiveSolver
 from .solver import AXES, CCMResult, CCMSolver, check_rigidity, rigidity_result, SolverStatus
 from .validation import check_load
 
-__all__ = ['solve_grid', 'rigidity_grid', 'GridResult', 'RigidityGrid']
+__all__ = ['solve_grid', 'rigidity_grid', 'GridResult', 'RigidityGrid', 'check_pressures']
 
 
 def _designs(designs):
@@ -24,7 +28,8 @@ def _designs(designs):
     return designs
 
 
-def _pressures(pressures):
+def check_pressures(pressures):
+    """Return gauge pressures as a 1-d float array; ValueError naming a bad one [Pa]."""
     values = np.atleast_1d(np.asarray(pressures, dtype=float))
     if values.ndim != 1 or not values.size:
         raise ValueError(f'`pressures` must be a non-empty 1-d sequence [Pa], got shape '
@@ -126,6 +131,12 @@ class GridResult:
         Global (X, Z) of the tip [m].
     models : ndarray of str, shape (D, P, F)
         Model of every scene, as `pipeline.model_label` names it.
+    curvature, fit_rmsd : ndarray, shape (D, P, F)
+        Signed curvature [1/m] and RMSD [m] of every scene's circle fit, equal to its
+        result's `curvature` and `fit_rmsd` (the same samples and fit, compiled over
+        both cores); computed on first use.
+    valid : ndarray of bool, shape (D, P, F)
+        Every scene's result's `valid` (the CCM's small-rotation rule).
 
     """
 
@@ -168,6 +179,68 @@ class GridResult:
         self.models[scene] = model_label(result)
         self._singles[scene] = result
         self._batch[scene] = -1
+
+    @functools.cached_property
+    def _circles(self):
+        """(curvature, rmsd), shape (D, P, F) each: every scene's samples and circle fit."""
+        out = np.full((self._batch.size, 2), np.nan)
+        for b, (batch, solvers, slots, loaded) in enumerate(self._batches):
+            scenes = np.flatnonzero(self._batch == b)
+            if scenes.size:
+                out[scenes] = self._batch_circles(scenes, batch, solvers, slots)
+        for scene, result in self._singles.items():
+            out[scene] = result.curvature, result.fit_rmsd
+        return out[:, 0].reshape(self.shape), out[:, 1].reshape(self.shape)
+
+    def _batch_circles(self, scenes, batch, solvers, slots):
+        """Circle fits (S, 2) of a batch's scenes: compiled for the CCM and the PCC."""
+        rows = self._row[scenes]
+        solver = solvers[0]
+        if isinstance(solver, CCMSolver) and all(
+                s.samples_per_segment == solver.samples_per_segment for s in solvers):
+            lengths = np.array([s.segments.lengths for s in solvers])
+            return shape_kernels.ccm_circles(batch.states[rows], lengths, slots[rows],
+                                             solver.samples_per_segment)
+        if isinstance(solver, PCCSolver):
+            _, p, f = np.unravel_index(scenes, self.shape)
+            datas = numba.typed.List([s.kernel_data(False) for s in solvers])
+            return shape_kernels.pcc_circles(
+                batch.states[rows], datas, np.array([s._sample_segment for s in solvers]),
+                np.array([s._sample_offset for s in solvers]), slots[rows],
+                self.pressures[p], np.ascontiguousarray(self.tip_forces[f]))
+        # Another discretisation: each scene's own result.
+        out = np.empty((scenes.size, 2))
+        for k, scene in enumerate(scenes):
+            result = self.result(*np.unravel_index(scene, self.shape))
+            out[k] = result.curvature, result.fit_rmsd
+        return out
+
+    @functools.cached_property
+    def valid(self):
+        """
+        Whether every scene's state obeys its model's small-rotation rule, shape (D, P, F).
+
+        As each result's `valid`: |2 d L_i| < 1 in every CCM segment; always True for the
+        geometrically exact rungs.
+        """
+        out = np.ones(self._batch.size, dtype=bool)
+        for b, (batch, solvers, _, _) in enumerate(self._batches):
+            scenes = np.flatnonzero(self._batch == b)
+            if scenes.size and isinstance(solvers[0], CCMSolver):
+                out[scenes] = CCMResult.small_rotations(batch.states[self._row[scenes]])
+        for scene, result in self._singles.items():
+            out[scene] = result.valid
+        return out.reshape(self.shape)
+
+    @property
+    def curvature(self):
+        """Signed circle-fit curvature of every scene [1/m], shape (D, P, F)."""
+        return self._circles[0]
+
+    @property
+    def fit_rmsd(self):
+        """RMSD of every scene's samples from its circle [m], shape (D, P, F)."""
+        return self._circles[1]
 
     def result(self, design, pressure, force=0):
         """
@@ -239,7 +312,7 @@ def solve_grid(designs, pressures, tip_forces=((0.0, 0.0),), settings=ModelSetti
 
     """
     designs = _designs(designs)
-    pressures = _pressures(pressures)
+    pressures = check_pressures(pressures)
     forces = _tip_forces(tip_forces)
     _in_envelope(designs, pressures, forces)
     settings = _settings(settings)
@@ -392,7 +465,7 @@ def rigidity_grid(designs, pressures, axis='x', displacement=0.010, settings=Mod
 
     """
     designs = _designs(designs)
-    pressures = _pressures(pressures)
+    pressures = check_pressures(pressures)
     _in_envelope(designs, pressures, np.zeros((1, 2)))
     delta = check_rigidity(axis, displacement)
     settings = _settings(settings)

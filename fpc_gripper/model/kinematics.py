@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from . import kernels
+from . import kernels, shape_kernels
 
 __all__ = ['to_scaled', 'from_scaled', 'end_rotation', 'node_positions', 'midplane_samples',
            'material_positions', 'consistent_strain_map', 'consistent_from_strain']
@@ -58,7 +58,7 @@ def node_positions(q, lengths):
 
 def midplane_samples(q, lengths, per_segment=16):
     """
-    Midplane samples at x = L_i j/m, j = 0..m-1 of every segment, then the tip.
+    Midplane samples at x = L_i j/m, j = 0..m-1 of every segment, then the tip (compiled).
 
     Returns
     -------
@@ -68,15 +68,9 @@ def midplane_samples(q, lengths, per_segment=16):
         Angle of the tangent from +X towards +Z [rad].
 
     """
-    nodes, theta, _ = node_positions(q, lengths)
-    xi = np.arange(per_segment) / per_segment
-    x, z = _segment_points(q, lengths, nodes, theta, slice(None), xi[None, :])
-    du = (1.0 + q[:, :1]) + 3.0 * q[:, 1:2] * xi ** 2
-    dw = 2.0 * q[:, 3:4] * xi
-    ang = theta[:, None] + np.arctan2(dw, du)
-    tip_angle = theta[-1] + np.arctan2(2.0 * q[-1, 3], 1.0 + q[-1, 0] + 3.0 * q[-1, 1])
-    points = np.concatenate([np.stack([x.ravel(), z.ravel()], axis=1), nodes[-1:]])
-    return points, np.concatenate([ang.ravel(), [tip_angle]])
+    return shape_kernels.ccm_samples(np.ascontiguousarray(q, dtype=float),
+                                     np.ascontiguousarray(lengths, dtype=float),
+                                     int(per_segment))
 
 
 def _segment_points(q, lengths, nodes, theta, segment, xi):

@@ -211,7 +211,9 @@ class _ArcFeature:
         # Signed: |beta| has a kink where the finger passes flat.
         self.table = None
         if all(s is not None for s in self.states):
-            self.table = PchipInterpolator(self.grid, [float(s.beta[0]) for s in self.states])
+            # The turning from the state, as the result's beta[0]: no samples are built.
+            self.table = PchipInterpolator(self.grid, [float(self.arc.turning(s.state))
+                                                       for s in self.states])
         self._loaded = {}
 
     def _tabled(self, pressure, tip_force):
@@ -260,9 +262,14 @@ class _ArcFeature:
         """
         out = [None] * len(pressures)
         index, starts = [], []
+        tabled = [k for k, (p, f) in enumerate(zip(pressures, tip_forces)) if self._tabled(p, f)]
+        if tabled:
+            # One call for all: PCHIP evaluates every point exactly as it would alone.
+            values = self.table(np.array([pressures[k] for k in tabled], dtype=float))
+            for k, value in zip(tabled, values):
+                out[k] = abs(float(value))
         for k, (pressure, force) in enumerate(zip(pressures, tip_forces)):
-            if self._tabled(pressure, force):
-                out[k] = abs(float(self.table(pressure)))
+            if out[k] is not None:
                 continue
             start = self._nearest(pressure) if any(force) else None
             if start is None:

@@ -314,3 +314,31 @@ def newton_step(grad, hess, floor=1e-8):
     min_eig = float(lam.min())
     lam = np.maximum(np.abs(lam), floor * np.abs(lam).max())
     return -(vec @ ((vec.T @ grad.ravel()) / lam)).reshape(grad.shape), min_eig
+
+
+def midplane_samples(q, lengths, per_segment=16):
+    """
+    Midplane samples at x = L_i j/m, j = 0..m-1 of every segment, then the tip.
+
+    Returns
+    -------
+    points : ndarray, shape (N m + 1, 2)
+        Global (X, Z) [m].
+    tangent : ndarray, shape (N m + 1,)
+        Angle of the tangent from +X towards +Z [rad].
+
+    """
+    nodes, theta, _ = node_positions(q, lengths)
+    xi = np.arange(per_segment) / per_segment
+    length = lengths[:, None]
+    u = length * ((1.0 + q[:, :1]) * xi + q[:, 1:2] * xi ** 3)
+    w = length * q[:, 3:4] * xi ** 2
+    du = (1.0 + q[:, :1]) + 3.0 * q[:, 1:2] * xi ** 2
+    dw = 2.0 * q[:, 3:4] * xi
+    c, s = np.cos(theta)[:, None], np.sin(theta)[:, None]
+    x = nodes[:-1, :1] + c * u - s * w
+    z = nodes[:-1, 1:] + s * u + c * w
+    ang = theta[:, None] + np.arctan2(dw, du)
+    tip_angle = theta[-1] + np.arctan2(2.0 * q[-1, 3], 1.0 + q[-1, 0] + 3.0 * q[-1, 1])
+    points = np.concatenate([np.stack([x.ravel(), z.ravel()], axis=1), nodes[-1:]])
+    return points, np.concatenate([ang.ravel(), [tip_angle]])
