@@ -56,7 +56,7 @@ def test_figure(tmp_path, capsys):
     (['--vary', 'Cy'], 'FIELD=VALUES'),
     (['--pressure=-1e3'], '`pressures` must be finite and >= 0'),
     (['--pressure', '0:1e5'], 'start:stop:count'),
-    (['--design', '/nonexistent.yaml'], 'cannot read design'),
+    (['--design', '/nonexistent.yaml'], 'cannot read actuator design'),
     (['--segments', '4'], '--segments applies to --model paper'),
     (['--scheduler', 'local:x'], "'local:N' needs an integer"),
 ])
