@@ -225,7 +225,7 @@ def test_bad_input_is_refused_by_name(case, tmp_path, capsys):
         calibrate(BASE, markers=bad)
     status = main(['--design', str(tmp_path / 'none.yaml'), '--markers', str(bad),
                    '--out', str(tmp_path / 'out')])
-    assert status == 2 and 'cannot read design' in capsys.readouterr().err
+    assert status == 2 and 'cannot read actuator design' in capsys.readouterr().err
     base = tmp_path / 'base.yaml'
     BASE.to_yaml(base)
     status = main(['--design', str(base), '--markers', str(bad), '--out', str(tmp_path / 'o')])

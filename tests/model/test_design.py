@@ -54,7 +54,7 @@ def test_replace_returns_new_validated_design():
     ({'H': float('nan')}, '`H` must be finite'),
     ({'emc_coefficients': (1e6, 0, 0, -1e5)}, 'increases on'),
     ({'emc_coefficients': (1.0, 2.0)}, '4 numbers'),
-    ({'pressure_work_factor': 0.0}, '`pressure_work_factor` must be > 0'),
+    ({'pressure_work_factor': 0.0}, r'`pressure_work_factor` must be in \[0.1, 10\]'),
     ({'pressure_work_factor': float('inf')}, '`pressure_work_factor` must be finite'),
 ])
 def test_invalid_designs_name_the_problem(fields, message):

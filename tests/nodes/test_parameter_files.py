@@ -39,7 +39,8 @@ CHANGED = {
         'sim_slew_rate_pa_s': 1.0e6, 'sim_deadband_pa': 250.0, 'sim_noise_std_pa': 0.0,
         'sim_max_output_pa': 6.0e5, 'sim_full_scale_pa': 8.0e5, 'sim_adc_bits': 16,
         'sim_seed': 7, 'max_pressure': 3.0e5, 'rate_limit_pa_s': 5.0e5,
-        'command_timeout_s': 0.25, 'safe_state': 'hold', 'publish_rate_hz': 100.0,
+        'command_timeout_s': 0.25, 'safe_state': 'hold', 'tracking_tolerance_pa': 1.0e4,
+        'tracking_timeout_s': 0.0, 'overpressure_margin_pa': 2.5e4, 'publish_rate_hz': 100.0,
         'diagnostics_rate_hz': 1.0, 'atmospheric_pressure': 100000.0,
         'frame_prefix': 'left/'},
     'gripper_controller': {
