@@ -53,6 +53,7 @@ import tempfile
 import threading
 import time
 
+from diagnostic_msgs.msg import DiagnosticArray
 from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import WrenchStamped
 from nav_msgs.msg import Path
@@ -101,6 +102,8 @@ STOP_ORDER = ('gripper_controller', 'virtual_object', 'model_node', 'regulator_b
 #: Stamped topics (per finger) whose messages the probe and the recording must agree on.
 COMPARED = ('pressure_command', 'shape')
 STOP_TIMEOUT_S = 30.0
+#: Cumulative counters of model_node's diagnostics, summed over the fingers in each sample.
+MODEL_COUNTERS = ('solves', 'shared', 'coalesced', 'rejected', 'failures')
 #: Deep reader queues, so that this process is not the first to drop.
 PROBE_QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
 RELIABLE = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
@@ -271,6 +274,7 @@ class Window:
         self.latencies = []
         self.commands = self.exact = self.merged = self.lost = 0
         self.shapes = self.shape_gaps = 0
+        self.solve_ms = []
         self.goals = []
         self.faults = []
 
@@ -355,6 +359,10 @@ class Probe(Node):
                                      PROBE_QOS, raw=True)
         self.create_subscription(DiagnosticStatus, 'controller_state', self._on_state,
                                  PROBE_QOS)
+        # model_node's own counters, per finger: solves, coalesced and rejected inputs...
+        self.model_counters = {}
+        self.create_subscription(DiagnosticArray, '/diagnostics', self._on_diagnostics,
+                                 PROBE_QOS)
         self.create_timer(0.1, self._expire)
         self.states = 0
 
@@ -418,6 +426,18 @@ class Probe(Node):
         if header is not None:
             # The publisher's clock at publish: this process's own delays do not count.
             self.trackers[index].shape(header[0], info['source_timestamp'])
+
+    def _on_diagnostics(self, msg):
+        for status in msg.status:
+            name = status.name.rpartition(': ')
+            if not name[0].endswith('/model_node') or name[2] not in self.fingers:
+                continue
+            values = {kv.key: kv.value for kv in status.values}
+            try:
+                self.window.solve_ms.append(float(values['solve_time_ms']))
+                self.model_counters[name[2]] = {key: int(values[key]) for key in MODEL_COUNTERS}
+            except (KeyError, ValueError):
+                pass
 
     # -- goals
 
@@ -643,9 +663,18 @@ def slope_per_hour(times, values):
     return float(np.polyfit(t[good], v[good], 1)[0] * 3600.0)
 
 
+def _finite(values):
+    return [v for v in values if v is not None and math.isfinite(v)]
+
+
 def _mean(values):
-    values = [v for v in values if v is not None and math.isfinite(v)]
+    values = _finite(values)
     return sum(values) / len(values) if values else math.nan
+
+
+def _median(values):
+    values = _finite(values)
+    return float(np.median(values)) if values else math.nan
 
 
 def minute_table(samples, latency_t, latency_ms, names, duration, recorded=None):
@@ -693,6 +722,12 @@ def minute_table(samples, latency_t, latency_ms, names, duration, recorded=None)
     rows.append(('recorder growth [MiB/min]', *per_span(
         lambda span, picked: 60.0 * (picked[-1]['mcap_mib'] - picked[0]['mcap_mib'])
         / (picked[-1]['t'] - picked[0]['t']) if len(picked) > 1 else math.nan)))
+    rows.append(('model_node solve, median of its diagnostics [ms]', *per_span(
+        lambda span, picked: _median(s['model_solve_ms'] for s in picked))))
+    for key in MODEL_COUNTERS:
+        rows.append((f'model_node {key} (its counters)', *per_span(
+            lambda span, picked: picked[-1]['model_counters'][key]
+            - picked[0]['model_counters'][key] if picked else math.nan)))
     if recorded is not None:
         probed, absent = recorded
         rows.append(('probe messages missing from the recording', *per_span(
@@ -843,7 +878,7 @@ def make_chart(results, path):
     samples = results['samples']
     names = list(results['processes']) + ['soak']
     t = np.array([s['t'] for s in samples]) / 60.0
-    fig, axes = plt.subplots(6, 1, figsize=(11, 15), sharex=True)
+    fig, axes = plt.subplots(6, 1, figsize=(13, 15), sharex=True)
 
     def proc(name, key):
         return np.array([s['proc'][name].get(key, math.nan) for s in samples], dtype=float)
@@ -874,11 +909,11 @@ def make_chart(results, path):
     for crash in results['crashes']:
         for ax in axes:
             ax.axvline(crash['t'] / 60.0, color='tab:red', lw=1, alpha=0.6)
-        axes[0].text(crash['t'] / 60.0, axes[0].get_ylim()[1], f' {crash["node"]} died',
-                     color='tab:red', va='top', fontsize=8)
+        axes[0].text(crash['t'] / 60.0, 0.03, f' {crash["node"]} died', color='tab:red',
+                     fontsize=8, transform=axes[0].get_xaxis_transform())
     for ax in axes:
         ax.grid(True, alpha=0.3)
-        ax.legend(fontsize=7, ncol=4, loc='upper left')
+        ax.legend(fontsize=7, loc='upper left', bbox_to_anchor=(1.005, 1.0))
     axes[-1].set_xlabel('time [min]')
     cfg = results['config']
     fig.suptitle(f'fpc_gripper soak: {cfg["measured_s"] / 60:.1f} min at {cfg["rate_hz"]:g} '
@@ -956,6 +991,10 @@ class Soak:
             'shapes': window.shapes, 'shape_gaps': window.shape_gaps,
             'faults': len(window.faults), 'goals': len(goals),
             'goals_reached': sum(g['reached'] for g in goals), 'mcap_mib': mcap_mib,
+            'model_solve_ms': float(np.median(window.solve_ms)) if window.solve_ms
+            else math.nan,
+            'model_counters': {key: sum(c[key] for c in probe.model_counters.values())
+                               for key in MODEL_COUNTERS},
         }
         self.samples.append(sample)
         lat = sample['latency']
@@ -1105,7 +1144,8 @@ class Soak:
         print(table)
         print(f'latency over the run: {_latency_text(results["latency_ms"])}; commands '
               f'{results["commands"]}; goals reached {results["goals_reached"]}')
-        print(f'faults: {results["fault_counts"]}')
+        print(f'faults: {results["fault_counts"]}; model_node counters at the end: '
+              f'{self.samples[-1]["model_counters"] if self.samples else {}}')
         print(f'recording: {_recording_text(recording)}')
         print('RSS slope after the first minute [MiB/h]: ' + ', '.join(
             f'{n} {v:+.1f}' for n, v in results['rss_slope_mib_per_h'].items()))
@@ -1145,7 +1185,8 @@ def write_csv(path, samples, names):
     header = ['t', 'load1', 'machine_cpu_pct', *[f'{n}_{k}' for n in names for k in keys],
               *[f'latency_{k}_ms' for k in ('p50', 'p95', 'p99', 'max')], 'latency_n',
               'commands', 'exact', 'merged', 'lost', 'shapes', 'shape_gaps', 'faults', 'goals',
-              'goals_reached', 'mcap_mib']
+              'goals_reached', 'mcap_mib', 'model_solve_ms',
+              *[f'model_{key}' for key in MODEL_COUNTERS]]
     with open(path, 'w', newline='') as stream:
         writer = csv.writer(stream)
         writer.writerow(header)
@@ -1156,7 +1197,8 @@ def write_csv(path, samples, names):
                 *[s['latency'][k] for k in ('p50', 'p95', 'p99', 'max')], s['latency']['n'],
                 s['commands'], s['exact'], s['merged'], s['lost'], s['shapes'],
                 s['shape_gaps'], s['faults'], s['goals'], s['goals_reached'],
-                f'{s["mcap_mib"]:.3f}'])
+                f'{s["mcap_mib"]:.3f}', s['model_solve_ms'],
+                *[s['model_counters'][key] for key in MODEL_COUNTERS]])
 
 
 def parse_args(argv):
