@@ -1,0 +1,69 @@
+"""The soak benchmark's own measuring parts: CDR header reading and command-to-shape matching."""
+
+import math
+import pathlib
+import sys
+
+from nav_msgs.msg import Path
+from rclpy.serialization import serialize_message
+from sensor_msgs.msg import FluidPressure
+
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / 'bench'))
+from soak import cdr_fluid_pressure, cdr_header, LatencyTracker, NS  # noqa: E402, I100
+
+
+def _pressure(sec, nanosec, frame, value):
+    msg = FluidPressure(fluid_pressure=value, variance=3.0)
+    msg.header.stamp.sec, msg.header.stamp.nanosec = sec, nanosec
+    msg.header.frame_id = frame
+    return serialize_message(msg)
+
+
+def test_header_and_pressure_read_back_from_rclpy_serialization():
+    # Frame lengths 0..9 walk the double through every alignment pad.
+    for n in range(10):
+        frame = 'f' * n
+        data = _pressure(-5, 999_999_999, frame, 101325.5 + n)
+        assert cdr_header(data) == -5 * NS + 999_999_999
+        assert cdr_header(data, frame.encode()) == (-5 * NS + 999_999_999, True)
+        if n:
+            assert cdr_header(data, b'g' * n)[1] is False
+        assert cdr_header(data, (frame + 'x').encode())[1] is False
+        assert cdr_fluid_pressure(data) == 101325.5 + n
+    path = Path()
+    path.header.stamp.sec, path.header.frame_id = 7, 'finger_1'
+    assert cdr_header(serialize_message(path), b'finger_1') == (7 * NS, True)
+
+
+def test_garbage_is_not_a_header():
+    for data in (b'', b'\x00\x01\x00', b'\x01\x00' + bytes(30), b'\x00\x07' + bytes(30)):
+        assert cdr_header(data) is None
+    assert cdr_fluid_pressure(b'\x00\x01\x00\x00' + bytes(12)) is None
+    assert math.isnan(cdr_fluid_pressure(_pressure(0, 0, '', math.nan)))
+
+
+def test_latency_tracker_exact_merged_look_back_and_lost():
+    answers, lost = [], []
+    tracker = LatencyTracker(2 * NS, lambda ns, exact: answers.append((ns, exact)),
+                             lambda: lost.append(1))
+    tracker.command(100)
+    tracker.command(200)
+    # A shape stamped with a later input (a tip force at 250) answers both, merged.
+    tracker.shape(250, 1_000)
+    assert answers == [(900, False), (800, False)]
+    tracker.command(300)
+    tracker.shape(300, 1_300)
+    assert answers[-1] == (1_000, True)
+    # The shape taken before its command: found by the look back.
+    tracker.shape(400, 2_000)
+    tracker.command(400)
+    assert answers[-1] == (1_600, True)
+    # A shape published before the command was stamped answers nothing.
+    tracker.shape(10 * NS, 3_000)
+    tracker.command(5_000)
+    assert len(answers) == 4
+    tracker.expire(5_000 + 2 * NS)
+    assert lost == []
+    tracker.expire(5_001 + 2 * NS)
+    assert lost == [1]
+    assert not tracker.pending
