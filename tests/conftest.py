@@ -8,6 +8,13 @@ import pytest
 
 _ROOT = pathlib.Path(__file__).resolve().parents[1]
 
+_WORKER = os.environ.get('PYTEST_XDIST_WORKER', '')
+if _WORKER.startswith('gw') and os.environ.get('FPC_NETNS') == '1':
+    # xdist's workers share the namespace and name their nodes alike (the same rigs and
+    # namespaces in every process): each gets a DDS domain of its own, before any context.
+    _base = int(os.environ.get('ROS_DOMAIN_ID', '0'))
+    os.environ['ROS_DOMAIN_ID'] = str((_base + 1 + int(_WORKER[2:])) % 102)
+
 
 @pytest.hookimpl(tryfirst=True)
 def pytest_configure(config):
