@@ -92,7 +92,10 @@ class InputGuard:
         on_reject : callable
             ``on_reject(check)`` for every payload refused (an `InputCheck`).
         on_lost : callable, optional
-            ``on_lost(count)`` when the middleware reports messages lost.
+            ``on_lost(count)`` when the middleware reports messages lost. Without it the
+            subscription has no event handler: each one is a waitable that rclpy's
+            executor re-adds to its wait set on every spin, which a fast control loop
+            sharing the executor feels.
 
         Returns
         -------
@@ -111,9 +114,11 @@ class InputGuard:
         def lost(info):
             count = int(info.total_count_change)
             self.lost += count
-            if on_lost is not None and count > 0:
+            if count > 0:
                 on_lost(count)
 
+        if on_lost is None:
+            return node.create_subscription(msg_type, topic, callback, qos, raw=True)
         try:
             return node.create_subscription(
                 msg_type, topic, callback, qos, raw=True,
