@@ -163,7 +163,7 @@ class ControllerInputs:
             self._problems.pop(source, None)
             return True
         self.rejected += 1
-        self.last_rejection = bounded(f'{source}: {check.detail}')
+        self.last_rejection = bounded(f'{source} ({check.rejection.value}): {check.detail}')
         self._problems[source] = self.last_rejection
         return False
 

@@ -3,6 +3,7 @@
 import dataclasses
 import enum
 import math
+import numbers
 
 from fpc_gripper.model.validation import ArgumentError
 from fpc_gripper.model.validation import check_force
@@ -72,13 +73,13 @@ class InputCheck:
 
 
 def real_or_none(value):
-    """Return `value` as a float (NaN and infinities included), or None if it is no number."""
-    if isinstance(value, bool):
+    """Return a real number as a float (NaN and infinities included), anything else as None."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
         return None
     try:
         return float(value)
     except OverflowError:
-        return math.copysign(math.inf, value)
+        return math.inf if value > 0 else -math.inf
     except (TypeError, ValueError):
         return None
 

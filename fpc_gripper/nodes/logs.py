@@ -34,7 +34,8 @@ def bounded(text, limit=MAX_LOG_CHARS):
     Returns
     -------
     str
-        Without NUL characters, which no C logger or DDS string carries.
+        Valid UTF-8 without NUL characters (escaped): a C logger cuts a line at a NUL
+        and refuses a lone surrogate, and a DDS string carries neither.
 
     """
     try:
@@ -43,6 +44,7 @@ def bounded(text, limit=MAX_LOG_CHARS):
         text = f'<unprintable {type(text).__name__}>'
     if len(text) > limit:
         text = f'{text[:limit]}... ({len(text) - limit} more characters)'
+    text = text.encode('utf-8', 'backslashreplace').decode('utf-8')
     return text.replace('\x00', '\\x00')
 
 

@@ -575,7 +575,7 @@ class ModelCore:
     def _record(self, state, check, source, stamp_ns, now_ns):
         if not check.accepted:
             state.rejection = check.rejection
-            state.last_rejection = bounded(f'{source}: {check.detail}')
+            state.last_rejection = bounded(f'{source} ({check.rejection.value}): {check.detail}')
             state.rejected += check.rejection is not Rejection.LOST
             return False
         state.rejection = None
