@@ -22,7 +22,9 @@ finger ``finger_<i>/{command_pa,feedforward_pa,rho_m,phase,contact_force_n,satur
 (pressures gauge). ``/diagnostics`` carries the same status at 1 Hz and at every change
 of mode, goal status or level (goal reached, stalled, feedback lost).
 
-The control law is :class:`fpc_gripper.control.controller.GripperControlLaw`.
+The control law is :class:`fpc_gripper.control.controller.GripperControlLaw`; every input
+reaches it through :class:`fpc_gripper.control.inputs.ControllerInputs`, which checks it
+first (a rejected input keeps the last good value and makes the status WARN).
 """
 
 import functools

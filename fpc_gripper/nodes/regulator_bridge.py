@@ -126,7 +126,10 @@ class RegulatorBridge(LifecycleNode):
     Each finger of the gripper config gets one backend channel guarded by a
     :class:`~fpc_gripper.regulators.safety.ChannelSupervisor` (clamp, rate
     limit, command watchdog, safe state). Commands and measurements on the
-    topics are ABSOLUTE pressures [Pa]; the backend works in gauge pressure.
+    topics are ABSOLUTE pressures [Pa]; the backend works in gauge pressure. A
+    command is checked first (`RegulatorCore.offer_command`: a finite number at or
+    above ``min_absolute_pressure``, a bounded frame_id and payload); a rejected one
+    changes nothing and makes its channel WARN until the next good one.
 
     Parameters
     ----------
