@@ -5,8 +5,8 @@ import math
 from fpc_gripper.nodes.input_limits import check_absolute_pressure
 from fpc_gripper.nodes.input_limits import check_frame
 from fpc_gripper.nodes.input_limits import check_tip_force_value
+from fpc_gripper.nodes.input_limits import checked_bounds
 from fpc_gripper.nodes.input_limits import DEFAULT_BOUNDS
-from fpc_gripper.nodes.input_limits import InputBounds
 from fpc_gripper.nodes.input_limits import InputCheck
 from fpc_gripper.nodes.input_limits import real_or_none
 from fpc_gripper.nodes.input_limits import Rejection
@@ -63,9 +63,7 @@ class ControllerInputs:
 
     @bounds.setter
     def bounds(self, value):
-        if not isinstance(value, InputBounds):
-            raise TypeError(f'`bounds` must be an InputBounds, got {type(value).__name__}')
-        self._bounds = value
+        self._bounds = checked_bounds(value, self.frames)
 
     # -- inputs -----------------------------------------------------------------------------
 

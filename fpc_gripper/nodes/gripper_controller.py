@@ -61,6 +61,7 @@ from fpc_gripper.model import PRESSURE_MODEL_NAMES
 from fpc_gripper.model.pipeline import MAX_SEGMENTS
 from fpc_gripper.model.pipeline import ModelSettings
 from fpc_gripper.nodes.guard import InputGuard
+from fpc_gripper.nodes.input_limits import checked_bounds
 from fpc_gripper.nodes.logs import bounded
 from fpc_gripper.nodes.logs import NodeLog
 from fpc_gripper.nodes.parameters import BOUND_NAMES
@@ -285,7 +286,8 @@ class GripperController(Node):
 
     def _validate_parameters(self, parameters):
         try:
-            input_bounds(self, {p.name: p.value for p in parameters})
+            checked_bounds(input_bounds(self, {p.name: p.value for p in parameters}),
+                           getattr(self, '_frames', ()))
         except (TypeError, ValueError) as exc:
             return SetParametersResult(successful=False, reason=str(exc))
         overrides = {}

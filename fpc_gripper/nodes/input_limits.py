@@ -13,7 +13,7 @@ from fpc_gripper.nodes.logs import bounded
 
 __all__ = ['DEFAULT_BOUNDS', 'InputBounds', 'InputCheck', 'MAX_STAMP_NS', 'MAX_STAMP_SEC',
            'Rejection', 'check_absolute_pressure', 'check_frame', 'check_stamp',
-           'check_tip_force_value', 'real_or_none', 'stale_detail']
+           'check_tip_force_value', 'checked_bounds', 'real_or_none', 'stale_detail']
 
 #: Largest ``builtin_interfaces/Time.sec`` (an int32) [s].
 MAX_STAMP_SEC = 2 ** 31 - 1
@@ -144,6 +144,28 @@ class InputBounds:
 
 #: The bounds the nodes start with.
 DEFAULT_BOUNDS = InputBounds()
+
+
+def checked_bounds(bounds, frames=()):
+    """
+    Return `bounds` if it is an `InputBounds` under which every frame of `frames` passes.
+
+    Raises
+    ------
+    TypeError
+        If `bounds` is no InputBounds.
+    ValueError
+        If ``max_frame_id_length`` is shorter than the longest of `frames` (the frames
+        the node expects), naming it.
+
+    """
+    if not isinstance(bounds, InputBounds):
+        raise TypeError(f'`bounds` must be an InputBounds, got {type(bounds).__name__}')
+    longest = max((len(frame) for frame in frames), default=0)
+    if bounds.max_frame_id_length < longest:
+        raise ValueError(f'`max_frame_id_length` must be >= {longest} [characters], the '
+                         f'longest finger frame, got {bounds.max_frame_id_length}')
+    return bounds
 
 
 def stale_detail(stamp_ns, now_ns, stale_after_s):

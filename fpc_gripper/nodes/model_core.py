@@ -12,6 +12,7 @@ from fpc_gripper.nodes.input_limits import check_absolute_pressure
 from fpc_gripper.nodes.input_limits import check_frame
 from fpc_gripper.nodes.input_limits import check_stamp
 from fpc_gripper.nodes.input_limits import check_tip_force_value
+from fpc_gripper.nodes.input_limits import checked_bounds
 from fpc_gripper.nodes.input_limits import DEFAULT_BOUNDS
 from fpc_gripper.nodes.input_limits import InputBounds
 from fpc_gripper.nodes.input_limits import InputCheck
@@ -371,13 +372,7 @@ class ModelCore:
 
     @bounds.setter
     def bounds(self, value):
-        if not isinstance(value, InputBounds):
-            raise TypeError(f'`bounds` must be an InputBounds, got {type(value).__name__}')
-        longest = max(len(self._frame_prefix + name) for name in self._names)
-        if value.max_frame_id_length < longest:
-            raise ValueError(f'`max_frame_id_length` must be >= {longest} [characters], the '
-                             f'longest finger frame, got {value.max_frame_id_length}')
-        self._bounds = value
+        self._bounds = checked_bounds(value, [self._frame_prefix + n for n in self._names])
 
     @property
     def max_rate_hz(self):

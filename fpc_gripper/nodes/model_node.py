@@ -42,6 +42,7 @@ from fpc_gripper.model.pipeline import finger_model
 from fpc_gripper.model.pipeline import MAX_SEGMENTS
 from fpc_gripper.model.pipeline import ModelSettings
 from fpc_gripper.nodes.guard import InputGuard
+from fpc_gripper.nodes.input_limits import checked_bounds
 from fpc_gripper.nodes.logs import NodeLog
 from fpc_gripper.nodes.model_core import DEFAULT_STALE_AFTER_S
 from fpc_gripper.nodes.model_core import Level
@@ -372,19 +373,12 @@ class ModelNode(Node):
                 return SetParametersResult(
                     successful=False, reason=f'`{param.name}` must be finite, got {value}')
         bounds = {p.name: p.value for p in parameters if p.name in BOUND_NAMES}
-        if bounds and getattr(self, '_core', None) is not None:
+        if bounds:
             try:
-                self._check_bounds(input_bounds(self, bounds))
+                checked_bounds(input_bounds(self, bounds), getattr(self, '_frames', ()))
             except (TypeError, ValueError) as exc:
                 return SetParametersResult(successful=False, reason=str(exc))
         return SetParametersResult(successful=True)
-
-    def _check_bounds(self, bounds):
-        """Raise ValueError if `bounds` refuse a finger frame (the core's own check)."""
-        longest = max(len(frame) for frame in self._frames)
-        if bounds.max_frame_id_length < longest:
-            raise ValueError(f'`max_frame_id_length` must be >= {longest} [characters], the '
-                             f'longest finger frame, got {bounds.max_frame_id_length}')
 
     def _apply_parameters(self, parameters):
         values = {p.name: p.value for p in parameters}

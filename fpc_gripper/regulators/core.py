@@ -6,8 +6,8 @@ import math
 
 from fpc_gripper.nodes.input_limits import check_absolute_pressure
 from fpc_gripper.nodes.input_limits import check_frame
+from fpc_gripper.nodes.input_limits import checked_bounds
 from fpc_gripper.nodes.input_limits import DEFAULT_BOUNDS
-from fpc_gripper.nodes.input_limits import InputBounds
 from fpc_gripper.nodes.input_limits import InputCheck
 from fpc_gripper.nodes.input_limits import Rejection
 from fpc_gripper.nodes.logs import bounded
@@ -203,9 +203,7 @@ class RegulatorCore:
                  bounds=DEFAULT_BOUNDS):
         self.backend = backend
         self.monitor = monitor
-        if not isinstance(bounds, InputBounds):
-            raise TypeError(f'`bounds` must be an InputBounds, got {type(bounds).__name__}')
-        self.bounds = bounds
+        self.bounds = checked_bounds(bounds)
         self._channels = [_Channel(limits) for _ in range(int(n_channels))]
         self._time = MonotonicTime()
         self._backend_fault = None

@@ -317,7 +317,8 @@ def test_rejected_input_keeps_the_state_and_warns_until_an_accepted_one():
     assert len(factory.calls) == calls
     status = core.status(0)
     assert status.level is Level.WARN
-    assert status.values['last_rejection'] == "tip_force: frame_id 'finger_1' is not 'finger_0'"
+    assert status.values['last_rejection'] == \
+        "tip_force (wrong frame): frame_id 'finger_1' is not 'finger_0'"
     assert status.values['pressure_pa'] == '100000.0' and status.values['rejected'] == '6'
     assert core.status(1).level is Level.OK
     core.offer_pressure(0, ATM + 1e5, now_ns=3 * MS)
