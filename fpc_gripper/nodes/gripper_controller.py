@@ -22,7 +22,9 @@ finger ``finger_<i>/{command_pa,feedforward_pa,rho_m,phase,contact_force_n,satur
 (pressures gauge). ``/diagnostics`` carries the same status at 1 Hz and at every change
 of mode, goal status or level (goal reached, stalled, feedback lost).
 
-The control law is :class:`fpc_gripper.control.controller.GripperControlLaw`.
+The control law is :class:`fpc_gripper.control.controller.GripperControlLaw`; every input
+reaches it through :class:`fpc_gripper.control.inputs.ControllerInputs`, which checks it
+first (a rejected input keeps the last good value and makes the status WARN).
 """
 
 import functools
@@ -44,11 +46,11 @@ from sensor_msgs.msg import FluidPressure
 from std_msgs.msg import Float64
 
 from fpc_gripper.control.controller import ControllerConfig
-from fpc_gripper.control.controller import FingerMeasurement
 from fpc_gripper.control.controller import GoalStatus
 from fpc_gripper.control.controller import GripperControlLaw
 from fpc_gripper.control.controller import SAFE_STATES
 from fpc_gripper.control.geometry import PalmGeometry
+from fpc_gripper.control.inputs import ControllerInputs
 from fpc_gripper.control.inverse import InverseModel
 from fpc_gripper.grasp.finger import FingerGrasp
 from fpc_gripper.grasp.objects import make_object
@@ -58,8 +60,15 @@ from fpc_gripper.io.config import load_gripper_config
 from fpc_gripper.model import PRESSURE_MODEL_NAMES
 from fpc_gripper.model.pipeline import MAX_SEGMENTS
 from fpc_gripper.model.pipeline import ModelSettings
+from fpc_gripper.nodes.guard import InputGuard
+from fpc_gripper.nodes.input_limits import checked_bounds
+from fpc_gripper.nodes.logs import bounded
+from fpc_gripper.nodes.logs import NodeLog
+from fpc_gripper.nodes.parameters import BOUND_NAMES
 from fpc_gripper.nodes.parameters import declare_table
 from fpc_gripper.nodes.parameters import float_range
+from fpc_gripper.nodes.parameters import input_bound_table
+from fpc_gripper.nodes.parameters import input_bounds
 from fpc_gripper.nodes.parameters import int_range
 from fpc_gripper.nodes.runner import run_node
 
@@ -67,7 +76,6 @@ __all__ = ['GripperController', 'main']
 
 _RELIABLE = QoSProfile(depth=10, history=HistoryPolicy.KEEP_LAST,
                        reliability=ReliabilityPolicy.RELIABLE)
-_THROTTLE_S = 2.0
 _DIAGNOSTICS_PERIOD_S = 1.0
 #: Parameters copied into ControllerConfig (same names).
 _LAW_PARAMETERS = ('max_pressure', 'slew_rate_pa_s', 'approach_rate_pa_s', 'kp', 'ki',
@@ -143,6 +151,7 @@ def _parameter_table(config_max_pressure):
          {'floating_point_range': float_range(3.0e4, 1.2e5)}),
         ('frame_prefix', '', 'Prefix of the finger frames (<prefix>finger_<i>) of the '
          "commands and of the tip forces accepted, as model_node's.", {'read_only': True}),
+        *input_bound_table(),
     )
 
 
@@ -190,9 +199,11 @@ class GripperController(Node):
                                       PalmGeometry.from_config(config), self._law_config(),
                                       self._grasps(config, settings))
         n = len(self._names)
-        self._pressure = [None] * n
-        self._stamp = [None] * n
-        self._tip_force = [(0.0, 0.0)] * n
+        self._log = NodeLog(self.get_logger())
+        self._inputs = ControllerInputs(self._law, self._frames,
+                                        self.get_parameter('atmospheric_pressure').value,
+                                        input_bounds(self))
+        self._guard = InputGuard(self.get_parameter('max_payload_bytes').value)
         self._last_output = None
         self._max_command = -math.inf
         self._last_key = None
@@ -203,14 +214,15 @@ class GripperController(Node):
         self._aperture_pub = self.create_publisher(Float64, 'aperture', _RELIABLE)
         self._state_pub = self.create_publisher(DiagnosticStatus, 'controller_state', _RELIABLE)
         self._diagnostics_pub = self.create_publisher(DiagnosticArray, '/diagnostics', _RELIABLE)
-        for i, name in enumerate(self._names):
-            self.create_subscription(FluidPressure, f'{name}/pressure',
-                                     functools.partial(self._on_pressure, i),
-                                     qos_profile_sensor_data)
-            self.create_subscription(WrenchStamped, f'{name}/tip_force',
-                                     functools.partial(self._on_tip_force, i), _RELIABLE)
-        self.create_subscription(Float64, 'aperture_command', self._on_aperture, _RELIABLE)
-        self.create_subscription(Float64, 'grasp_force_command', self._on_grasp, _RELIABLE)
+        for i, (name, frame) in enumerate(zip(self._names, self._frames)):
+            self._subscribe(FluidPressure, f'{name}/pressure', f'{frame}/pressure',
+                            qos_profile_sensor_data, functools.partial(self._on_pressure, i))
+            self._subscribe(WrenchStamped, f'{name}/tip_force', f'{frame}/tip_force', _RELIABLE,
+                            functools.partial(self._on_tip_force, i))
+        self._subscribe(Float64, 'aperture_command', 'aperture_command', _RELIABLE,
+                        self._on_aperture)
+        self._subscribe(Float64, 'grasp_force_command', 'grasp_force_command', _RELIABLE,
+                        self._on_grasp)
         self._timer = None
         self._start_timer()
         self.add_on_set_parameters_callback(self._validate_parameters)
@@ -261,6 +273,11 @@ class GripperController(Node):
     def _rate(self):
         return self.get_parameter('control_rate_hz').value
 
+    def _subscribe(self, msg_type, topic, source, qos, callback):
+        """Subscribe an input through the guard; `source` names it in the diagnostics."""
+        self._guard.subscribe(self, msg_type, topic, qos, callback,
+                              functools.partial(self._on_refused, source))
+
     def _law_config(self, overrides=None):
         values = {name: self.get_parameter(name).value for name in _LAW_PARAMETERS}
         values.update(overrides or {})
@@ -268,6 +285,11 @@ class GripperController(Node):
         return ControllerConfig(**values)
 
     def _validate_parameters(self, parameters):
+        try:
+            checked_bounds(input_bounds(self, {p.name: p.value for p in parameters}),
+                           getattr(self, '_frames', ()))
+        except (TypeError, ValueError) as exc:
+            return SetParametersResult(successful=False, reason=str(exc))
         overrides = {}
         for param in parameters:
             if param.name == 'max_pressure' and param.value > self._gripper.max_pressure:
@@ -292,6 +314,11 @@ class GripperController(Node):
                 f'{n} {self.get_parameter(n).value}' for n in changed))
         if 'control_rate_hz' in names:
             self._start_timer()
+        if names & set(BOUND_NAMES):
+            self._inputs.bounds = input_bounds(self)
+            self._guard.max_payload_bytes = self._inputs.bounds.max_payload_bytes
+        if 'atmospheric_pressure' in names:
+            self._inputs.atmospheric_pressure = self.get_parameter('atmospheric_pressure').value
 
     def _start_timer(self):
         if self._timer is not None:
@@ -304,53 +331,42 @@ class GripperController(Node):
         return self.get_clock().now().nanoseconds * 1e-9
 
     def _on_pressure(self, index, msg):
-        gauge = msg.fluid_pressure - self.get_parameter('atmospheric_pressure').value
-        if not math.isfinite(gauge):
-            self.get_logger().warning(
-                f'{self._names[index]}/pressure ignored: {msg.fluid_pressure} Pa is not finite',
-                throttle_duration_sec=_THROTTLE_S)
-            return
-        self._pressure[index] = gauge
-        self._stamp[index] = self._now()
+        self._after_input(self._inputs.offer_pressure(
+            index, msg.fluid_pressure, self._now(), msg.header.frame_id), 'pressure', index)
 
     def _on_tip_force(self, index, msg):
-        name = self._names[index]
         force = msg.wrench.force
-        if msg.header.frame_id not in ('', self._frames[index]):
-            self.get_logger().warning(
-                f'{name}/tip_force ignored: frame {msg.header.frame_id!r} is not '
-                f'{self._frames[index]!r}', throttle_duration_sec=_THROTTLE_S)
-            return
-        if not (math.isfinite(force.x) and math.isfinite(force.z)):
-            self.get_logger().warning(f'{name}/tip_force ignored: not finite',
-                                      throttle_duration_sec=_THROTTLE_S)
-            return
-        self._tip_force[index] = (float(force.x), float(force.z))
+        self._after_input(self._inputs.offer_tip_force(
+            index, force.x, force.z, msg.header.frame_id), 'tip_force', index)
 
     def _on_aperture(self, msg):
-        try:
-            used = self._law.set_aperture(msg.data, self._now())
-        except (TypeError, ValueError) as exc:
-            self.get_logger().warning(f'aperture_command rejected: {exc}')
-            return
-        self.get_logger().info(f'aperture goal {msg.data * 1e3:.1f} mm '
-                               f'(using {used * 1e3:.1f} mm)')
+        check = self._after_input(self._inputs.offer_aperture(msg.data, self._now()),
+                                  'aperture_command')
+        if check.accepted:
+            self._log.info(f'aperture goal {msg.data * 1e3:.1f} mm '
+                           f'(using {check.value * 1e3:.1f} mm)')
 
     def _on_grasp(self, msg):
-        try:
-            self._law.set_grasp_force(msg.data, self._now())
-        except (TypeError, ValueError) as exc:
-            self.get_logger().warning(f'grasp_force_command rejected: {exc}')
-            return
-        self.get_logger().info(f'grasp goal {msg.data:.3f} N total normal force')
+        check = self._after_input(self._inputs.offer_grasp_force(msg.data, self._now()),
+                                  'grasp_force_command')
+        if check.accepted:
+            self._log.info(f'grasp goal {msg.data:.3f} N total normal force')
+
+    def _on_refused(self, source, check):
+        self._after_input(self._inputs.reject(source, check.rejection, check.detail), source)
+
+    def _after_input(self, check, topic, index=None):
+        if not check.accepted:
+            where = topic if index is None else f'{self._names[index]}/{topic}'
+            self._log.warning(f'{where} rejected ({check.rejection.value}), keeping the last '
+                              f'good value: {check.detail}', key=(where, check.rejection))
+        return check
 
     # -- the loop ---------------------------------------------------------------------------
 
     def _on_timer(self):
         now = self._now()
-        measurements = [FingerMeasurement(p, s, f) for p, s, f in
-                        zip(self._pressure, self._stamp, self._tip_force)]
-        out = self._law.step(now, measurements)
+        out = self._law.step(now, self._inputs.measurements())
         self._last_output = out
         stamp = self.get_clock().now().to_msg()
         atmospheric = self.get_parameter('atmospheric_pressure').value
@@ -371,6 +387,9 @@ class GripperController(Node):
         self._report(out, status, now)
 
     def _status(self, out):
+        # A rejected input is a WARN until its topic delivers a good one.
+        problems = self._inputs.problems
+        level = max(int(out.level), 1 if problems else 0)
         values = {
             'mode': out.mode.value,
             'goal_status': out.status.name.lower(),
@@ -386,22 +405,24 @@ class GripperController(Node):
             values[f'{name}/phase'] = finger.phase.value
             values[f'{name}/contact_force_n'] = f'{finger.contact_force:.4f}'
             values[f'{name}/saturated'] = str(finger.saturated)
+        values['rejected_inputs'] = str(self._inputs.rejected)
+        values['last_rejection'] = self._inputs.last_rejection
         return DiagnosticStatus(
-            level=bytes([int(out.level)]), name=self.get_fully_qualified_name(),
-            message=out.message, hardware_id='gripper',
-            values=[KeyValue(key=k, value=v) for k, v in values.items()])
+            level=bytes([level]), name=self.get_fully_qualified_name(),
+            message=bounded(f'{out.message}; {problems}' if problems else out.message),
+            hardware_id='gripper', values=[KeyValue(key=k, value=v) for k, v in values.items()])
 
     def _report(self, out, status, now):
-        key = (out.mode, out.status, out.level)
+        level = ord(status.level)
+        key = (out.mode, out.status, level)
         changed = key != self._last_key
         if changed:
-            # One call site per severity: rclpy refuses to change it between calls.
-            if int(out.level) == 2:
-                self.get_logger().error(out.message)
-            elif int(out.level) == 1:
-                self.get_logger().warning(out.message)
+            if level == 2:
+                self._log.error(status.message)
+            elif level == 1:
+                self._log.warning(status.message)
             elif out.status is not GoalStatus.ACTIVE:
-                self.get_logger().info(out.message)
+                self._log.info(status.message)
             self._last_key = key
         due = self._last_diagnostics is None or now - self._last_diagnostics \
             >= _DIAGNOSTICS_PERIOD_S

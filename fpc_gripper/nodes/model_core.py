@@ -8,10 +8,22 @@ import time
 import numpy as np
 
 from fpc_gripper.model.pipeline import model_label
+from fpc_gripper.nodes.input_limits import check_absolute_pressure
+from fpc_gripper.nodes.input_limits import check_frame
+from fpc_gripper.nodes.input_limits import check_stamp
+from fpc_gripper.nodes.input_limits import check_tip_force_value
+from fpc_gripper.nodes.input_limits import checked_bounds
+from fpc_gripper.nodes.input_limits import DEFAULT_BOUNDS
+from fpc_gripper.nodes.input_limits import InputBounds
+from fpc_gripper.nodes.input_limits import InputCheck
+from fpc_gripper.nodes.input_limits import MAX_STAMP_NS
+from fpc_gripper.nodes.input_limits import Rejection
+from fpc_gripper.nodes.input_limits import stale_detail
+from fpc_gripper.nodes.logs import bounded
 
 __all__ = ['DEFAULT_STALE_AFTER_S', 'RATE_BURST', 'RIGIDITY_DISPLACEMENT', 'FingerState',
-           'FingerStatus', 'InputCheck', 'Level', 'ModelCore', 'Rejection', 'Update',
-           'check_pressure', 'check_tip_force', 'stale_detail']
+           'FingerStatus', 'InputBounds', 'InputCheck', 'Level', 'ModelCore', 'Rejection',
+           'Update', 'check_pressure', 'check_tip_force', 'stale_detail']
 
 #: Capacity of each finger's solve-rate token bucket: sustained rate <= max_rate_hz, bursts
 #: of at most this many back-to-back solves [solves].
@@ -26,16 +38,6 @@ _RIGIDITY_CACHE = 64
 _TOKEN_SLACK = 1e-9
 
 
-class Rejection(enum.Enum):
-    """Why an input message was ignored."""
-
-    NOT_FINITE = 'not finite'
-    BELOW_VACUUM = 'below vacuum'
-    OVER_LIMIT = 'over the pressure limit'
-    WRONG_FRAME = 'wrong frame'
-    STALE = 'stale'
-
-
 class Level(enum.IntEnum):
     """Health of one finger; the values are those of diagnostic_msgs/DiagnosticStatus."""
 
@@ -44,68 +46,27 @@ class Level(enum.IntEnum):
     ERROR = 2
 
 
-@dataclasses.dataclass(frozen=True)
-class InputCheck:
+def _in_order(value, stamp, *checks):
     """
-    Outcome of checking one input message.
+    Reject `value` for the first failed check, or return None when every one passed.
 
-    Attributes
-    ----------
-    value : float or tuple of float
-        Gauge pressure [Pa] or tip force (f0, p0) [N]; meaningful when accepted.
-    rejection : Rejection or None
-        None when the input is accepted.
-    detail : str
-        What was wrong, with values and units ('' when accepted).
-    clamped : bool
-        A gauge pressure below atmosphere was raised to 0 Pa.
-
+    A stamp that is no valid time goes first (nothing else is worth reading), then
+    `checks` in order, then the stamp's age against the clock.
     """
-
-    value: object
-    rejection: Rejection = None
-    detail: str = ''
-    clamped: bool = False
-
-    @property
-    def accepted(self):
-        """True when the input may be used."""
-        return self.rejection is None
-
-
-def stale_detail(stamp_ns, now_ns, stale_after_s):
-    """
-    Explain why a header stamp is stale, or return None when it is not.
-
-    A zero stamp (an unstamped message) and a zero `now_ns` (a simulated clock that has not
-    started) carry no age and are never stale; stamps in the future are not stale either.
-
-    Parameters
-    ----------
-    stamp_ns : int
-        Header stamp [ns].
-    now_ns : int
-        Current time of the node clock [ns].
-    stale_after_s : float
-        Largest accepted age [s]; 0 disables the check.
-
-    Returns
-    -------
-    str or None
-
-    """
-    if stale_after_s <= 0.0 or stamp_ns == 0 or now_ns <= 0:
-        return None
-    age = (now_ns - stamp_ns) * 1e-9
-    if age <= stale_after_s:
-        return None
-    return f'header stamp is {age:.3f} s old, more than stale_after_s = {stale_after_s:g} s'
+    invalid = stamp.rejection is Rejection.BAD_STAMP
+    for check in (stamp,) * invalid + checks + (stamp,):
+        if not check.accepted:
+            return InputCheck(value, check.rejection, check.detail)
+    return None
 
 
 def check_pressure(absolute, *, atmospheric_pressure, max_pressure, stamp_ns=0, now_ns=0,
-                   stale_after_s=0.0):
+                   stale_after_s=0.0, future_limit_s=0.0, frame_id='', bounds=DEFAULT_BOUNDS):
     """
     Check an absolute pressure message and convert it to gauge.
+
+    The header first (a valid stamp, a frame_id of bounded length), then the pressure
+    (`check_absolute_pressure`), then the stamp against the clock (`check_stamp`).
 
     Parameters
     ----------
@@ -115,41 +76,42 @@ def check_pressure(absolute, *, atmospheric_pressure, max_pressure, stamp_ns=0, 
         Gauge reference [Pa].
     max_pressure : float
         Largest accepted gauge pressure [Pa]; exactly the limit is accepted.
-    stamp_ns, now_ns : int
-        Header stamp and node clock [ns], see `stale_detail`.
-    stale_after_s : float
-        Largest accepted age [s]; 0 disables the check.
+    stamp_ns : int or (int, int)
+        Header stamp [ns], or its (sec, nanosec); 0 when unstamped.
+    now_ns : int
+        Node clock [ns].
+    stale_after_s, future_limit_s : float
+        Largest accepted age and lead of the stamp [s]; 0 disables the check.
+    frame_id : str
+        Header frame (any frame, of bounded length).
+    bounds : InputBounds
+        ``min_absolute_pressure`` and ``max_frame_id_length`` are used.
 
     Returns
     -------
     InputCheck
-        ``value`` is the gauge pressure [Pa]. Absolute pressures between vacuum and
-        atmosphere are accepted and clamped to 0 Pa gauge (``clamped`` True): the model
-        covers inflation only, and a vented channel reads a little below atmosphere.
+        ``value`` is the gauge pressure [Pa]. Absolute pressures between
+        ``bounds.min_absolute_pressure`` and atmosphere are accepted and clamped to 0 Pa
+        gauge (``clamped`` True): the model covers inflation only, and a vented channel
+        reads a little below atmosphere.
 
     """
-    absolute = float(absolute)
-    if not math.isfinite(absolute):
-        return InputCheck(absolute, Rejection.NOT_FINITE,
-                          f'fluid_pressure {absolute} Pa is not finite')
-    if absolute < 0.0:
-        return InputCheck(absolute, Rejection.BELOW_VACUUM,
-                          f'fluid_pressure {absolute:.1f} Pa absolute is below vacuum')
-    gauge = absolute - float(atmospheric_pressure)
-    if gauge > max_pressure:
-        return InputCheck(gauge, Rejection.OVER_LIMIT,
-                          f'fluid_pressure {absolute:.1f} Pa absolute is {gauge:.1f} Pa gauge, '
-                          f'over the limit {max_pressure:.1f} Pa gauge')
-    stale = stale_detail(stamp_ns, now_ns, stale_after_s)
-    if stale is not None:
-        return InputCheck(gauge, Rejection.STALE, stale)
-    if gauge < 0.0:
+    stamp = check_stamp(stamp_ns, now_ns, stale_after_s=stale_after_s,
+                        future_limit_s=future_limit_s)
+    pressure = check_absolute_pressure(absolute, atmospheric_pressure=atmospheric_pressure,
+                                       max_pressure=max_pressure,
+                                       min_absolute_pressure=bounds.min_absolute_pressure)
+    rejected = _in_order(pressure.value, stamp,
+                         check_frame(frame_id, max_length=bounds.max_frame_id_length), pressure)
+    if rejected is not None:
+        return rejected
+    if pressure.value < 0.0:
         return InputCheck(0.0, clamped=True)
-    return InputCheck(gauge)
+    return pressure
 
 
 def check_tip_force(f0, p0, frame_id, *, expected_frame, stamp_ns=0, now_ns=0,
-                    stale_after_s=0.0):
+                    stale_after_s=0.0, future_limit_s=0.0, bounds=DEFAULT_BOUNDS):
     """
     Check a tip force message.
 
@@ -162,10 +124,15 @@ def check_tip_force(f0, p0, frame_id, *, expected_frame, stamp_ns=0, now_ns=0,
         components mean nothing without their frame.
     expected_frame : str
         The finger frame, ``finger_<i>``.
-    stamp_ns, now_ns : int
-        Header stamp and node clock [ns], see `stale_detail`.
-    stale_after_s : float
-        Largest accepted age [s]; 0 disables the check.
+    stamp_ns : int or (int, int)
+        Header stamp [ns], or its (sec, nanosec); 0 when unstamped.
+    now_ns : int
+        Node clock [ns].
+    stale_after_s, future_limit_s : float
+        Largest accepted age and lead of the stamp [s]; 0 disables the check.
+    bounds : InputBounds
+        ``max_tip_force`` (the magnitude, within the model's 5 N envelope) and
+        ``max_frame_id_length`` are used.
 
     Returns
     -------
@@ -173,17 +140,11 @@ def check_tip_force(f0, p0, frame_id, *, expected_frame, stamp_ns=0, now_ns=0,
         ``value`` is (f0, p0) [N].
 
     """
-    force = (float(f0), float(p0))
-    if not all(math.isfinite(f) for f in force):
-        return InputCheck(force, Rejection.NOT_FINITE,
-                          f'force (x, z) = ({force[0]}, {force[1]}) N is not finite')
-    if frame_id != expected_frame:
-        return InputCheck(force, Rejection.WRONG_FRAME,
-                          f'frame_id {frame_id!r} is not {expected_frame!r}')
-    stale = stale_detail(stamp_ns, now_ns, stale_after_s)
-    if stale is not None:
-        return InputCheck(force, Rejection.STALE, stale)
-    return InputCheck(force)
+    stamp = check_stamp(stamp_ns, now_ns, stale_after_s=stale_after_s,
+                        future_limit_s=future_limit_s)
+    force = check_tip_force_value(f0, p0, limits=bounds.limits)
+    frame = check_frame(frame_id, expected_frame, max_length=bounds.max_frame_id_length)
+    return _in_order(force.value, stamp, frame, force) or force
 
 
 @dataclasses.dataclass(eq=False)
@@ -223,6 +184,10 @@ class FingerState:
         Kind of the last rejected input; cleared by the next accepted one.
     last_rejection : str
         Topic and detail of the last rejection ('none' before any).
+    rejected : int
+        Inputs rejected, malformed payloads included.
+    lost : int
+        Messages the middleware reported lost on the finger's inputs.
 
     """
 
@@ -242,6 +207,7 @@ class FingerState:
     rejection: Rejection = None
     last_rejection: str = 'none'
     rejected: int = 0
+    lost: int = 0
     clamped: int = 0
     coalesced: int = 0
     solves: int = 0
@@ -335,10 +301,14 @@ class ModelCore:
         Gauge reference [Pa].
     stale_after_s : float
         Largest accepted age of a header stamp [s]; 0 disables.
+    future_limit_s : float
+        Largest accepted lead of a header stamp over the clock [s]; 0 disables.
     max_rate_hz : float
         Sustained solve-rate cap per finger [Hz].
     frame_prefix : str
         A tip force must be in the frame ``frame_prefix + name`` of its finger.
+    bounds : InputBounds
+        Bounds on pressures, forces and frame ids (`check_pressure`, `check_tip_force`).
     timer : callable
         Monotonic seconds for solve timing.
 
@@ -346,7 +316,8 @@ class ModelCore:
 
     def __init__(self, fingers, solver_factory, *, max_pressure=math.inf,
                  atmospheric_pressure=101325.0, stale_after_s=0.0, max_rate_hz=200.0,
-                 frame_prefix='', timer=time.perf_counter):
+                 frame_prefix='', timer=time.perf_counter, future_limit_s=0.0,
+                 bounds=DEFAULT_BOUNDS):
         self._states = tuple(
             FingerState(name=name, design=design,
                         max_pressure=min(float(design.max_pressure), float(max_pressure)))
@@ -357,6 +328,8 @@ class ModelCore:
         self._frame_prefix = str(frame_prefix)
         self.atmospheric_pressure = atmospheric_pressure
         self.stale_after_s = stale_after_s
+        self.future_limit_s = future_limit_s
+        self.bounds = bounds
         self.max_rate_hz = max_rate_hz
         self._timer = timer
         self._rigidity = {}
@@ -382,6 +355,24 @@ class ModelCore:
     @stale_after_s.setter
     def stale_after_s(self, value):
         self._stale_after_s = _real_in_range('stale_after_s', value, 0.0, math.inf, '[s]')
+
+    @property
+    def future_limit_s(self):
+        """Largest accepted lead of a stamp over the clock [s]; 0 disables the check."""
+        return self._future_limit_s
+
+    @future_limit_s.setter
+    def future_limit_s(self, value):
+        self._future_limit_s = _real_in_range('future_limit_s', value, 0.0, math.inf, '[s]')
+
+    @property
+    def bounds(self):
+        """The `InputBounds` every input is checked against."""
+        return self._bounds
+
+    @bounds.setter
+    def bounds(self, value):
+        self._bounds = checked_bounds(value, [self._frame_prefix + n for n in self._names])
 
     @property
     def max_rate_hz(self):
@@ -455,7 +446,8 @@ class ModelCore:
 
     # -- inputs -----------------------------------------------------------------------------
 
-    def offer_pressure(self, index, absolute, stamp_ns=0, now_ns=0, source='pressure_command'):
+    def offer_pressure(self, index, absolute, stamp_ns=0, now_ns=0, source='pressure_command',
+                       frame_id=''):
         """
         Check an absolute pressure input of a finger and make it pending when accepted.
 
@@ -465,12 +457,14 @@ class ModelCore:
             Finger index.
         absolute : float
             Absolute pressure [Pa].
-        stamp_ns : int
-            Header stamp [ns]; 0 when unstamped.
+        stamp_ns : int or (int, int)
+            Header stamp [ns], or the header's (sec, nanosec); 0 when unstamped.
         now_ns : int
             Node clock [ns].
         source : str
             Topic name for the rejection text.
+        frame_id : str
+            Header frame (any, of bounded length).
 
         Returns
         -------
@@ -480,7 +474,9 @@ class ModelCore:
         state = self._states[index]
         check = check_pressure(absolute, atmospheric_pressure=self._atmospheric_pressure,
                                max_pressure=state.max_pressure, stamp_ns=stamp_ns,
-                               now_ns=now_ns, stale_after_s=self._stale_after_s)
+                               now_ns=now_ns, stale_after_s=self._stale_after_s,
+                               future_limit_s=self._future_limit_s, frame_id=frame_id,
+                               bounds=self._bounds)
         if self._record(state, check, source, stamp_ns, now_ns):
             state.gauge = check.value
             state.clamped += check.clamped
@@ -500,8 +496,8 @@ class ModelCore:
             Force along the finger's X and Z [N].
         frame_id : str
             Header frame; must be the finger's frame, ``frame_prefix + name``.
-        stamp_ns : int
-            Header stamp [ns]; 0 when unstamped.
+        stamp_ns : int or (int, int)
+            Header stamp [ns], or the header's (sec, nanosec); 0 when unstamped.
         now_ns : int
             Node clock [ns].
         source : str
@@ -516,21 +512,73 @@ class ModelCore:
         check = check_tip_force(f0, p0, frame_id,
                                 expected_frame=self._frame_prefix + state.name,
                                 stamp_ns=stamp_ns, now_ns=now_ns,
-                                stale_after_s=self._stale_after_s)
+                                stale_after_s=self._stale_after_s,
+                                future_limit_s=self._future_limit_s, bounds=self._bounds)
         if self._record(state, check, source, stamp_ns, now_ns):
             state.tip_force = check.value
         return check
 
+    def reject(self, index, rejection, detail, source):
+        """
+        Record an input of a finger that never became a message (malformed, too large).
+
+        Parameters
+        ----------
+        index : int
+            Finger index.
+        rejection : Rejection
+        detail : str
+            What was wrong (bounded here).
+        source : str
+            Topic name.
+
+        Returns
+        -------
+        InputCheck
+            The rejection, as the offers return it.
+
+        """
+        check = InputCheck(None, Rejection(rejection), bounded(detail))
+        self._record(self._states[index], check, source, 0, 0)
+        return check
+
+    def lost(self, index, count, source):
+        """
+        Record messages the middleware lost on an input of a finger (a WARN until the next input).
+
+        Parameters
+        ----------
+        index : int
+            Finger index.
+        count : int
+            Messages lost since the last report.
+        source : str
+            Topic name.
+
+        Returns
+        -------
+        InputCheck
+
+        """
+        state = self._states[index]
+        count = max(int(count), 0)
+        state.lost += count
+        return self.reject(index, Rejection.LOST,
+                           f'{count} message(s) lost ({state.lost} in all): the middleware '
+                           'could not deliver them', source)
+
     def _record(self, state, check, source, stamp_ns, now_ns):
         if not check.accepted:
             state.rejection = check.rejection
-            state.last_rejection = f'{source}: {check.detail}'
-            state.rejected += 1
+            state.last_rejection = bounded(f'{source} ({check.rejection.value}): {check.detail}')
+            state.rejected += check.rejection is not Rejection.LOST
             return False
         state.rejection = None
         state.coalesced += state.ready
         state.pending = True
-        state.stamp_ns = int(stamp_ns) if stamp_ns else int(now_ns)
+        stamp = check_stamp(stamp_ns).value
+        # Unstamped: the arrival time, inside the range a header can carry.
+        state.stamp_ns = stamp if stamp else min(max(int(now_ns), 0), MAX_STAMP_NS)
         return True
 
     # -- solving ----------------------------------------------------------------------------
@@ -761,7 +809,7 @@ class ModelCore:
             parts.append('state breaks the small-rotation rule (valid=False)')
         if result is None and state.failure is None and not waiting:
             parts.append('no state yet')
-        message = '; '.join(parts) if parts else 'ok'
+        message = bounded('; '.join(parts)) if parts else 'ok'
         pressure = 'none' if result is None else f'{state.result_key[1]:.1f}'
         force = (0.0, 0.0) if result is None else state.result_key[2:]
         values = {
@@ -775,8 +823,10 @@ class ModelCore:
             'input_pressure_pa': f'{state.gauge:.1f}',
             'input_tip_force': f'f0={state.tip_force[0]:.6g} N, p0={state.tip_force[1]:.6g} N',
             'curvature_per_m': 'none' if result is None else f'{result.curvature:.6g}',
-            'solver_message': state.failure or ('none' if result is None else result.message),
+            'solver_message': bounded(state.failure or (
+                'none' if result is None else result.message)),
             'rejected': str(state.rejected),
+            'lost_messages': str(state.lost),
             'clamped_to_zero_gauge': str(state.clamped),
             'coalesced': str(state.coalesced),
             'solves': str(state.solves),

@@ -37,16 +37,21 @@ from fpc_gripper.io.messages import rigidity_message
 from fpc_gripper.io.messages import serialized_shape
 from fpc_gripper.io.messages import shape_marker
 from fpc_gripper.io.messages import shape_message
-from fpc_gripper.io.messages import time_to_ns
 from fpc_gripper.model import PRESSURE_MODEL_NAMES
 from fpc_gripper.model.pipeline import finger_model
 from fpc_gripper.model.pipeline import MAX_SEGMENTS
 from fpc_gripper.model.pipeline import ModelSettings
+from fpc_gripper.nodes.guard import InputGuard
+from fpc_gripper.nodes.input_limits import checked_bounds
+from fpc_gripper.nodes.logs import NodeLog
 from fpc_gripper.nodes.model_core import DEFAULT_STALE_AFTER_S
 from fpc_gripper.nodes.model_core import Level
 from fpc_gripper.nodes.model_core import ModelCore
+from fpc_gripper.nodes.parameters import BOUND_NAMES
 from fpc_gripper.nodes.parameters import declare_table
 from fpc_gripper.nodes.parameters import float_range
+from fpc_gripper.nodes.parameters import input_bound_table
+from fpc_gripper.nodes.parameters import input_bounds
 from fpc_gripper.nodes.parameters import int_range
 from fpc_gripper.nodes.runner import run_node
 
@@ -64,7 +69,6 @@ STATE_QOS = QoSProfile(depth=1, history=HistoryPolicy.KEEP_LAST,
 _COMMAND_QOS = QoSProfile(depth=10, history=HistoryPolicy.KEEP_LAST,
                           reliability=ReliabilityPolicy.RELIABLE)
 _DIAGNOSTICS_QOS = _COMMAND_QOS
-_THROTTLE_S = 2.0
 _DIAGNOSTICS_PERIOD_S = 1.0
 # Slow outputs, at most once per period and the last update always sent: markers are for
 # people, and rigidity (two displacement-controlled solves) must not hold up the shapes [s].
@@ -133,6 +137,10 @@ def _parameter_table():
          'Inputs whose header stamp is older than this against the node clock are rejected '
          '[s]; 0 disables. Unstamped (zero) headers are never stale.',
          {'floating_point_range': float_range(0.0, 3600.0)}),
+        ('future_limit_s', 1.0,
+         'Inputs whose header stamp is more than this ahead of the node clock are rejected '
+         '[s]; 0 disables. Stamps that are no time (sec < 0, nanosec >= 1e9) always are.',
+         {'floating_point_range': float_range(0.0, 3600.0)}),
         ('rigidity_rate_hz', 10.0,
          "Largest rate of each finger's rigidity output [Hz]: K_x and K_z take two "
          "displacement-controlled solves at the state's pressure; 0 publishes none.",
@@ -141,6 +149,7 @@ def _parameter_table():
          'Prefix of every frame id published or expected (<prefix>palm, <prefix>finger_<i>), '
          'so that two grippers can share a tf tree, e.g. "left/".',
          {'read_only': True}),
+        *input_bound_table(),
     )
 
 
@@ -163,8 +172,16 @@ class ModelNode(Node):
     transient local with depth 1: a late subscriber gets the newest state from the
     publisher's history, and every message answers an input. Bad inputs are rejected and
     a failed solve publishes nothing: each finger keeps its last good state (see
-    :class:`~fpc_gripper.nodes.model_core.ModelCore`). Outputs carry the header stamp of
-    the input they answer (its arrival time when unstamped).
+    :class:`~fpc_gripper.nodes.model_core.ModelCore`). Every input is checked before any
+    solve or serialisation against bounds that are parameters: payload size (checked
+    before decoding: inputs are raw subscriptions), header stamp (a valid time, not
+    older than ``stale_after_s`` nor more than ``future_limit_s`` ahead of the node
+    clock), frame_id length, absolute pressure (``min_absolute_pressure`` up to
+    atmospheric plus the gripper's limit) and tip force magnitude (``max_tip_force``,
+    within the model's envelope); a refused payload and a message the middleware lost
+    are reported too. Outputs carry the header stamp of the input they answer (its
+    arrival time when unstamped): a stamp that passed these checks, so always a valid
+    time.
 
     Parameters
     ----------
@@ -219,7 +236,10 @@ class ModelNode(Node):
             max_pressure=config.max_pressure,
             atmospheric_pressure=param('atmospheric_pressure').value,
             stale_after_s=param('stale_after_s').value,
-            max_rate_hz=param('max_rate_hz').value, frame_prefix=prefix)
+            max_rate_hz=param('max_rate_hz').value, frame_prefix=prefix,
+            future_limit_s=param('future_limit_s').value, bounds=input_bounds(self))
+        self._log = NodeLog(self.get_logger())
+        self._guard = InputGuard(param('max_payload_bytes').value)
         self._core.warm_up(rigidity=param('rigidity_rate_hz').value > 0.0)
         names = self._core.names
         self._frames = tuple(prefix + name for name in names)
@@ -229,7 +249,6 @@ class ModelNode(Node):
         self._markers = _SlowOutput(_MARKER_PERIOD_S, self._publish_markers)
         self._rigidities = _SlowOutput(self._rigidity_period(), self._publish_rigidities)
         self._last_kinds = None
-        self._last_log = {}
         self._serialize_shapes = None
         self._create_topics(names)
         self._tf = self._broadcast_palm_transforms()
@@ -309,13 +328,19 @@ class ModelNode(Node):
         else:
             self._pressure_topic, qos = 'pressure_command', _COMMAND_QOS
         self._pressure_subs = tuple(
-            self.create_subscription(FluidPressure, f'{name}/{self._pressure_topic}',
-                                     functools.partial(self._on_pressure, i), qos)
-            for i, name in enumerate(names))
+            self._subscribe(i, FluidPressure, self._pressure_topic, qos, self._on_pressure)
+            for i in range(len(names)))
         self._force_subs = tuple(
-            self.create_subscription(WrenchStamped, f'{name}/tip_force',
-                                     functools.partial(self._on_tip_force, i), _COMMAND_QOS)
-            for i, name in enumerate(names))
+            self._subscribe(i, WrenchStamped, 'tip_force', _COMMAND_QOS, self._on_tip_force)
+            for i in range(len(names)))
+
+    def _subscribe(self, index, msg_type, topic, qos, callback):
+        """Subscribe one input of a finger through the guard (raw, size- and decode-checked)."""
+        name = self._core.names[index]
+        return self._guard.subscribe(
+            self, msg_type, f'{name}/{topic}', qos, functools.partial(callback, index),
+            functools.partial(self._on_refused, index, topic),
+            functools.partial(self._on_lost, index, topic))
 
     def _broadcast_palm_transforms(self):
         """Send the static transforms palm -> finger_<i> if tf2_ros is importable."""
@@ -347,6 +372,12 @@ class ModelNode(Node):
             if isinstance(value, float) and not math.isfinite(value):
                 return SetParametersResult(
                     successful=False, reason=f'`{param.name}` must be finite, got {value}')
+        bounds = {p.name: p.value for p in parameters if p.name in BOUND_NAMES}
+        if bounds:
+            try:
+                checked_bounds(input_bounds(self, bounds), getattr(self, '_frames', ()))
+            except (TypeError, ValueError) as exc:
+                return SetParametersResult(successful=False, reason=str(exc))
         return SetParametersResult(successful=True)
 
     def _apply_parameters(self, parameters):
@@ -356,6 +387,11 @@ class ModelNode(Node):
                 self._core.atmospheric_pressure = values['atmospheric_pressure']
             if 'stale_after_s' in values:
                 self._core.stale_after_s = values['stale_after_s']
+            if 'future_limit_s' in values:
+                self._core.future_limit_s = values['future_limit_s']
+            if values.keys() & set(BOUND_NAMES):
+                self._core.bounds = input_bounds(self)
+                self._guard.max_payload_bytes = self._core.bounds.max_payload_bytes
             if 'max_rate_hz' in values:
                 self._core.max_rate_hz = values['max_rate_hz']
                 self._rate_timer.timer_period_ns = int(round(1e9 / values['max_rate_hz']))
@@ -377,26 +413,38 @@ class ModelNode(Node):
         return self.get_clock().now().nanoseconds
 
     def _on_pressure(self, index, msg):
+        header = msg.header
         with self._lock:
-            check = self._core.offer_pressure(index, msg.fluid_pressure,
-                                              time_to_ns(msg.header.stamp), self._now_ns(),
-                                              source=self._pressure_topic)
+            check = self._core.offer_pressure(
+                index, msg.fluid_pressure, (header.stamp.sec, header.stamp.nanosec),
+                self._now_ns(), source=self._pressure_topic, frame_id=header.frame_id)
             self._after_input(index, check, self._pressure_topic)
 
     def _on_tip_force(self, index, msg):
+        header, force = msg.header, msg.wrench.force
         with self._lock:
-            force = msg.wrench.force
-            check = self._core.offer_tip_force(index, force.x, force.z, msg.header.frame_id,
-                                               time_to_ns(msg.header.stamp), self._now_ns())
+            check = self._core.offer_tip_force(
+                index, force.x, force.z, header.frame_id,
+                (header.stamp.sec, header.stamp.nanosec), self._now_ns())
             self._after_input(index, check, 'tip_force')
+
+    def _on_refused(self, index, topic, check):
+        """Report a payload the guard refused (too large, or no message of the type)."""
+        with self._lock:
+            self._after_input(index, self._core.reject(index, check.rejection, check.detail,
+                                                       topic), topic)
+
+    def _on_lost(self, index, topic, count):
+        """Report messages the middleware lost on an input (see README: empty payloads)."""
+        with self._lock:
+            self._after_input(index, self._core.lost(index, count, topic), topic)
 
     def _after_input(self, index, check, topic):
         if not check.accepted:
             name = self._core.names[index]
-            self._throttled(
-                self.get_logger().warning, (index, check.rejection),
+            self._log.warning(
                 f'{name}/{topic} rejected ({check.rejection.value}), keeping the last good '
-                f'state: {check.detail}')
+                f'state: {check.detail}', key=(index, check.rejection))
             self._publish_diagnostics()
             return
         self._run(self._core.ready(time.monotonic_ns()))
@@ -429,11 +477,10 @@ class ModelNode(Node):
         for update in updates:
             if update.result is None:
                 state = self._core.fingers[update.index]
-                self._throttled(
-                    self.get_logger().error, (update.index, 'solver'),
+                self._log.error(
                     f'{state.name}: solve at {state.gauge:.1f} Pa gauge, tip force '
                     f'({state.tip_force[0]:g}, {state.tip_force[1]:g}) N failed, keeping the '
-                    f'last good state: {update.failure}')
+                    f'last good state: {update.failure}', key=(update.index, 'solver'))
         self._publish_diagnostics()
         self._markers.dirty.update(u.index for u in good)
         if math.isfinite(self._rigidities.period_s):
@@ -513,14 +560,6 @@ class ModelNode(Node):
                     values=[KeyValue(key=k, value=v) for k, v in s.values.items()])
                 for name, s in zip(self._core.names, statuses)]
             self._diagnostics_pub.publish(array)
-
-    def _throttled(self, log, key, text):
-        """Log at most once per throttle period per (finger, kind) key."""
-        now = time.monotonic()
-        last = self._last_log.get(key)
-        if last is None or now - last >= _THROTTLE_S:
-            self._last_log[key] = now
-            log(text)
 
 
 def main(args=None):

@@ -1,8 +1,17 @@
 """Parameter declaration shared by the nodes: descriptor ranges and table-driven declaring."""
 
+import dataclasses
+
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 
-__all__ = ['float_range', 'int_range', 'declare_table']
+from fpc_gripper.nodes.input_limits import DEFAULT_BOUNDS
+from fpc_gripper.nodes.input_limits import InputBounds
+
+__all__ = ['BOUND_NAMES', 'float_range', 'int_range', 'declare_table', 'input_bound_table',
+           'input_bounds']
+
+#: The parameters named as the `InputBounds` fields.
+BOUND_NAMES = tuple(f.name for f in dataclasses.fields(InputBounds))
 
 
 def float_range(low, high):
@@ -33,3 +42,49 @@ def declare_table(node, table, defaults=None):
     for name, default, description, extra in table:
         node.declare_parameter(name, defaults.get(name, default),
                                ParameterDescriptor(description=description, **extra))
+
+
+def input_bound_table(names=BOUND_NAMES):
+    """
+    Return the `declare_table` rows of the input-bound parameters in `names`.
+
+    Every node that takes the bound declares it with the same description and range.
+    """
+    rows = {
+        'min_absolute_pressure': (
+            DEFAULT_BOUNDS.min_absolute_pressure,
+            'Pressures below this absolute value are rejected [Pa]: vacuum, or a message '
+            'whose pressure was never set (a default FluidPressure reads 0 Pa).',
+            {'floating_point_range': float_range(0.0, 3.0e4)}),
+        'max_tip_force': (
+            DEFAULT_BOUNDS.max_tip_force,
+            'Tip forces of a larger magnitude are rejected [N]; at most the model envelope, '
+            '5 N.', {'floating_point_range': float_range(1.0e-3, DEFAULT_BOUNDS.max_tip_force)}),
+        'max_frame_id_length': (
+            DEFAULT_BOUNDS.max_frame_id_length,
+            'Inputs whose header frame_id is longer are rejected [characters]; at least the '
+            'longest finger frame.', {'integer_range': int_range(1, 65536)}),
+        'max_payload_bytes': (
+            DEFAULT_BOUNDS.max_payload_bytes,
+            'Input messages whose serialized size is larger are rejected undecoded [bytes].',
+            {'integer_range': int_range(64, 1 << 24)}),
+    }
+    return tuple((name, *rows[name]) for name in names)
+
+
+def input_bounds(node, overrides=None):
+    """
+    Return the `InputBounds` of a node's bound parameters, with values replaced by name.
+
+    Bounds the node does not declare keep their defaults.
+
+    Raises
+    ------
+    ValueError, TypeError
+        If a value is out of its bounds (naming it).
+
+    """
+    values = {name: node.get_parameter(name).value for name in BOUND_NAMES
+              if node.has_parameter(name)}
+    values.update({k: v for k, v in (overrides or {}).items() if k in BOUND_NAMES})
+    return InputBounds(**values)

@@ -19,8 +19,12 @@ from sensor_msgs.msg import FluidPressure
 
 from fpc_gripper.io.config import default_gripper_config_path
 from fpc_gripper.io.config import load_gripper_config
+from fpc_gripper.nodes.guard import InputGuard
+from fpc_gripper.nodes.logs import NodeLog
 from fpc_gripper.nodes.parameters import declare_table
 from fpc_gripper.nodes.parameters import float_range
+from fpc_gripper.nodes.parameters import input_bound_table
+from fpc_gripper.nodes.parameters import input_bounds
 from fpc_gripper.nodes.parameters import int_range
 from fpc_gripper.nodes.runner import run_node
 from fpc_gripper.regulators.base import BackendFault
@@ -44,8 +48,9 @@ _STRUCTURAL = ('gripper_config', 'backend', 'modbus_config', 'modbus_host', 'mod
 
 _COMMAND_QOS = QoSProfile(depth=10, history=HistoryPolicy.KEEP_LAST,
                           reliability=ReliabilityPolicy.RELIABLE)
-_THROTTLE_S = 2.0
 _RECONNECT_S = 1.0
+# The bounds that apply to a pressure command.
+_BOUNDS = ('min_absolute_pressure', 'max_frame_id_length', 'max_payload_bytes')
 _LEVELS = {Level.OK: DiagnosticStatus.OK, Level.WARN: DiagnosticStatus.WARN,
            Level.ERROR: DiagnosticStatus.ERROR}
 
@@ -110,6 +115,7 @@ def _parameter_table():
          {'integer_range': int_range(1, 32)}),
         ('sim_seed', 0, 'Seed of the simulated readback noise.',
          {'integer_range': int_range(0, 2 ** 31 - 1)}),
+        *input_bound_table(_BOUNDS),
     )
 
 
@@ -120,7 +126,10 @@ class RegulatorBridge(LifecycleNode):
     Each finger of the gripper config gets one backend channel guarded by a
     :class:`~fpc_gripper.regulators.safety.ChannelSupervisor` (clamp, rate
     limit, command watchdog, safe state). Commands and measurements on the
-    topics are ABSOLUTE pressures [Pa]; the backend works in gauge pressure.
+    topics are ABSOLUTE pressures [Pa]; the backend works in gauge pressure. A
+    command is checked first (`RegulatorCore.offer_command`: a finite number at or
+    above ``min_absolute_pressure``, a bounded frame_id and payload); a rejected one
+    changes nothing and makes its channel WARN until the next good one.
 
     Parameters
     ----------
@@ -157,6 +166,8 @@ class RegulatorBridge(LifecycleNode):
         self._last_diag_time = None
         self._last_levels = None
         self._config_max_pressure = math.inf
+        self._log = NodeLog(self.get_logger())
+        self._guard = InputGuard(self.get_parameter('max_payload_bytes').value)
         self.add_on_set_parameters_callback(self._validate_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
         if self.get_parameter('auto_activate').value:
@@ -310,6 +321,10 @@ class RegulatorBridge(LifecycleNode):
     # -- parameters -------------------------------------------------------------------------
 
     def _validate_parameters(self, parameters):
+        try:
+            input_bounds(self, {p.name: p.value for p in parameters})
+        except (TypeError, ValueError) as exc:
+            return SetParametersResult(successful=False, reason=str(exc))
         for param in parameters:
             if param.name in _STRUCTURAL and self._configured:
                 return SetParametersResult(
@@ -341,6 +356,11 @@ class RegulatorBridge(LifecycleNode):
         if 'publish_rate_hz' in names and self._active:
             self._stop_timer()
             self._start_timer()
+        if names & set(_BOUNDS):
+            bounds = input_bounds(self)
+            self._guard.max_payload_bytes = bounds.max_payload_bytes
+            if self._core is not None:
+                self._core.bounds = bounds
 
     def _limits(self):
         requested = self.get_parameter('max_pressure').value
@@ -389,7 +409,7 @@ class RegulatorBridge(LifecycleNode):
             tracking_timeout_s=param('tracking_timeout_s').value,
             overpressure_margin_pa=param('overpressure_margin_pa').value,
             reconnect_interval_s=_RECONNECT_S,
-            atmospheric_pressure=param('atmospheric_pressure').value))
+            atmospheric_pressure=param('atmospheric_pressure').value), input_bounds(self))
         self._supervisors = self._core.supervisors
         self._last_levels = None
         self._pressure_pubs = tuple(
@@ -399,8 +419,9 @@ class RegulatorBridge(LifecycleNode):
         self._diag_pub = self.create_lifecycle_publisher(DiagnosticArray, '/diagnostics',
                                                          _COMMAND_QOS)
         self._command_subs = tuple(
-            self.create_subscription(FluidPressure, f'{name}/pressure_command',
-                                     functools.partial(self._on_command, i), _COMMAND_QOS)
+            self._guard.subscribe(self, FluidPressure, f'{name}/pressure_command',
+                                  _COMMAND_QOS, functools.partial(self._on_command, i),
+                                  functools.partial(self._on_refused, i))
             for i, name in enumerate(self._finger_names))
 
     def _build_backend(self, n_channels, register_map):
@@ -472,28 +493,33 @@ class RegulatorBridge(LifecycleNode):
     def _on_command(self, index, msg):
         name = self._finger_names[index]
         if not self._active:
-            self.get_logger().info(f'{name}/pressure_command ignored: node is not active',
-                                   throttle_duration_sec=_THROTTLE_S)
+            self._log.info(f'{name}/pressure_command ignored: node is not active',
+                           key=(index, 'inactive'))
             return
-        absolute = msg.fluid_pressure
-        if not math.isfinite(absolute) or absolute < 0.0:
-            self.get_logger().warning(
-                f'{name}/pressure_command rejected: {absolute} Pa is not a finite, '
-                'non-negative absolute pressure', throttle_duration_sec=_THROTTLE_S)
-            return
-        gauge = absolute - self.get_parameter('atmospheric_pressure').value
-        result = self._supervisors[index].command(gauge, self._latch())
-        if not result.accepted:
-            self.get_logger().warning(
+        check, result = self._core.offer_command(
+            index, msg.fluid_pressure, self._latch(),
+            atmospheric_pressure=self.get_parameter('atmospheric_pressure').value,
+            frame_id=msg.header.frame_id)
+        if result is None:
+            self._rejected(index, check)
+        elif not result.accepted:
+            self._log.warning(
                 f'{name}/pressure_command ignored: channel in safe state '
-                f'({self._supervisors[index].mode.name.lower()})',
-                throttle_duration_sec=_THROTTLE_S)
+                f'({self._supervisors[index].mode.name.lower()})', key=(index, 'safe'))
         elif result.clamped:
-            self.get_logger().warning(
-                f'{name}/pressure_command {gauge:.0f} Pa gauge clamped to '
+            self._log.warning(
+                f'{name}/pressure_command {check.value:.0f} Pa gauge clamped to '
                 f'{result.target:.0f} Pa gauge (max_pressure '
-                f'{self._supervisors[index].max_pressure:.0f} Pa)',
-                throttle_duration_sec=_THROTTLE_S)
+                f'{self._supervisors[index].max_pressure:.0f} Pa)', key=(index, 'clamped'))
+
+    def _on_refused(self, index, check):
+        if self._core is not None:
+            self._rejected(index, self._core.reject(index, check.rejection, check.detail))
+
+    def _rejected(self, index, check):
+        self._log.warning(
+            f'{self._finger_names[index]}/pressure_command rejected ({check.rejection.value}): '
+            f'{check.detail}', key=(index, check.rejection))
 
     def _on_timer(self):
         self._control_step(self._latch())
@@ -513,11 +539,10 @@ class RegulatorBridge(LifecycleNode):
             msg.variance = sample.variance
             self._pressure_pubs[sample.channel].publish(msg)
         for level, text in step.events:
-            # One call site per severity: rclpy refuses two severities at one call site.
             if level == Level.ERROR:
-                self.get_logger().error(text)
+                self._log.error(text)
             else:
-                self.get_logger().info(text)
+                self._log.info(text)
         self._publish_diagnostics(now, step.reports, force_diagnostics)
 
     def _publish_diagnostics(self, now, reports, force):

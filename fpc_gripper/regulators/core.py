@@ -4,6 +4,13 @@ import dataclasses
 import enum
 import math
 
+from fpc_gripper.nodes.input_limits import check_absolute_pressure
+from fpc_gripper.nodes.input_limits import check_frame
+from fpc_gripper.nodes.input_limits import checked_bounds
+from fpc_gripper.nodes.input_limits import DEFAULT_BOUNDS
+from fpc_gripper.nodes.input_limits import InputCheck
+from fpc_gripper.nodes.input_limits import Rejection
+from fpc_gripper.nodes.logs import bounded
 from fpc_gripper.regulators.base import BackendFault
 from fpc_gripper.regulators.safety import ChannelSupervisor
 from fpc_gripper.regulators.safety import MonotonicTime
@@ -155,6 +162,10 @@ class _Channel:
         self.off_since = None
         self.own_fault = None
         self.written = None
+        # The newest command's rejection (cleared by a good command), and counts.
+        self.rejection = None
+        self.last_rejection = 'none'
+        self.rejected = 0
 
 
 class RegulatorCore:
@@ -183,12 +194,16 @@ class RegulatorCore:
         ``ChannelSupervisor`` arguments (max_pressure, rate_limit_pa_s,
         command_timeout_s, safe_state).
     monitor : MonitorSettings
+    bounds : InputBounds
+        What `offer_command` accepts (``min_absolute_pressure``, ``max_frame_id_length``).
 
     """
 
-    def __init__(self, backend, n_channels, limits, monitor=MonitorSettings()):
+    def __init__(self, backend, n_channels, limits, monitor=MonitorSettings(),
+                 bounds=DEFAULT_BOUNDS):
         self.backend = backend
         self.monitor = monitor
+        self.bounds = checked_bounds(bounds)
         self._channels = [_Channel(limits) for _ in range(int(n_channels))]
         self._time = MonotonicTime()
         self._backend_fault = None
@@ -215,6 +230,59 @@ class RegulatorCore:
     def command(self, index, pressure_pa_gauge, now):
         """Pass a command [Pa gauge] to one channel's supervisor; return its CommandResult."""
         return self._channels[index].supervisor.command(pressure_pa_gauge, now)
+
+    def offer_command(self, index, absolute, now, *, atmospheric_pressure, frame_id=''):
+        """
+        Check a command message of a channel (absolute [Pa]); pass it on when it is good.
+
+        A command that is not a finite number, below ``bounds.min_absolute_pressure`` (a
+        vacuum, or a message never filled in) or with an over-long frame_id changes
+        nothing; the channel reports WARN until its next good command. A good one goes
+        to the supervisor (which clamps it to [0, max_pressure]).
+
+        Parameters
+        ----------
+        index : int
+            Channel.
+        absolute : float
+            Commanded absolute pressure [Pa].
+        now : float
+            Time of arrival [s].
+        atmospheric_pressure : float
+            Gauge reference [Pa].
+        frame_id : str
+            The message's frame (any, of bounded length).
+
+        Returns
+        -------
+        (InputCheck, CommandResult or None)
+            The check (``value``: the gauge command [Pa]) and the supervisor's answer,
+            None when rejected.
+
+        """
+        channel = self._channels[index]
+        check = check_frame(frame_id, max_length=self.bounds.max_frame_id_length)
+        if check.accepted:
+            check = check_absolute_pressure(
+                absolute, atmospheric_pressure=atmospheric_pressure,
+                min_absolute_pressure=self.bounds.min_absolute_pressure)
+        if not check.accepted:
+            self._reject(channel, check)
+            return check, None
+        channel.rejection = None
+        return check, channel.supervisor.command(check.value, now)
+
+    def reject(self, index, rejection, detail):
+        """Record a command of a channel refused before it became a value; return the check."""
+        check = InputCheck(None, Rejection(rejection), bounded(detail))
+        self._reject(self._channels[index], check)
+        return check
+
+    @staticmethod
+    def _reject(channel, check):
+        channel.rejection = channel.last_rejection = bounded(
+            f'command rejected ({check.rejection.value}): {check.detail}')
+        channel.rejected += 1
 
     def start(self, now):
         """Leave the stopped state (lifecycle activation); acknowledge latched faults."""
@@ -352,7 +420,8 @@ class RegulatorCore:
         supervisor = channel.supervisor
         if output.mode == SupervisorMode.FAULT and supervisor.fault is not None:
             level = Level.ERROR
-        elif output.mode in (SupervisorMode.WATCHDOG, SupervisorMode.FAULT):
+        elif output.mode in (SupervisorMode.WATCHDOG, SupervisorMode.FAULT) \
+                or channel.rejection is not None:
             level = Level.WARN
         else:
             level = Level.OK
@@ -370,5 +439,9 @@ class RegulatorCore:
             'safe_state': supervisor.safe_state.value,
             'max_pressure_pa_gauge': f'{supervisor.max_pressure:.1f}',
             'backend_fault': supervisor.fault or (status.fault or 'none'),
+            'rejected_commands': str(channel.rejected),
+            'last_rejection': channel.last_rejection,
         }
-        return ChannelReport(level, output.mode, output.reason, values)
+        message = output.reason if channel.rejection is None else \
+            f'{output.reason}; {channel.rejection}'
+        return ChannelReport(level, output.mode, message, values)

@@ -80,6 +80,9 @@ def assert_same_state(result, expected):
     (math.inf, Rejection.NOT_FINITE, 'not finite'),
     (-math.inf, Rejection.NOT_FINITE, 'not finite'),
     (-1.0, Rejection.BELOW_VACUUM, '-1.0 Pa absolute is below vacuum'),
+    # A default-constructed FluidPressure reads 0 Pa: no command and no reading.
+    (0.0, Rejection.BELOW_VACUUM, '0.0 Pa absolute is below min_absolute_pressure = 10000 Pa'),
+    (9999.9, Rejection.BELOW_VACUUM, 'below min_absolute_pressure'),
     (ATM + 400e3 + 1.0, Rejection.OVER_LIMIT, '400001.0 Pa gauge, over the limit 400000.0'),
 ])
 def test_check_pressure_rejects(absolute, rejection, text):
@@ -94,7 +97,7 @@ def test_check_pressure_rejects(absolute, rejection, text):
     (ATM + 400e3, 400e3, False),  # exactly the limit
     (ATM + 123.5, 123.5, False),
     (ATM - 300.0, 0.0, True),  # vented channel, a little under atmosphere
-    (0.0, 0.0, True),
+    (1.0e4, 0.0, True),  # exactly the plausibility bound
     (np.float32(ATM + 1000.0), 1000.0, False),
 ])
 def test_check_pressure_accepts_and_converts_to_gauge(absolute, gauge, clamped):
@@ -314,7 +317,8 @@ def test_rejected_input_keeps_the_state_and_warns_until_an_accepted_one():
     assert len(factory.calls) == calls
     status = core.status(0)
     assert status.level is Level.WARN
-    assert status.values['last_rejection'] == "tip_force: frame_id 'finger_1' is not 'finger_0'"
+    assert status.values['last_rejection'] == \
+        "tip_force (wrong frame): frame_id 'finger_1' is not 'finger_0'"
     assert status.values['pressure_pa'] == '100000.0' and status.values['rejected'] == '6'
     assert core.status(1).level is Level.OK
     core.offer_pressure(0, ATM + 1e5, now_ns=3 * MS)

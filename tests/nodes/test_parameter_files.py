@@ -31,7 +31,9 @@ CHANGED = {
     'model_node': {
         'tolerance': 0.0, 'n_segments': 12, 'pressure_model': 'isobaric', 'max_rate_hz': 150.0,
         'pressure_input': 'measured', 'atmospheric_pressure': 100000.0, 'stale_after_s': 2.5,
-        'rigidity_rate_hz': 4.0, 'frame_prefix': 'left/'},
+        'rigidity_rate_hz': 4.0, 'frame_prefix': 'left/', 'future_limit_s': 0.5,
+        'min_absolute_pressure': 2.0e4, 'max_tip_force': 2.5, 'max_frame_id_length': 64,
+        'max_payload_bytes': 2048},
     'regulator_bridge': {
         # Not activated: a modbus backend without a register map would refuse to configure.
         'auto_activate': False, 'backend': 'modbus', 'modbus_config': GRIPPER,
@@ -42,7 +44,9 @@ CHANGED = {
         'command_timeout_s': 0.25, 'safe_state': 'hold', 'tracking_tolerance_pa': 1.0e4,
         'tracking_timeout_s': 0.0, 'overpressure_margin_pa': 2.5e4, 'publish_rate_hz': 100.0,
         'diagnostics_rate_hz': 1.0, 'atmospheric_pressure': 100000.0,
-        'frame_prefix': 'left/'},
+        'frame_prefix': 'left/', 'tracking_tolerance_pa': 1.0e4, 'tracking_timeout_s': 3.0,
+        'overpressure_margin_pa': 2.5e4, 'min_absolute_pressure': 2.0e4,
+        'max_frame_id_length': 64, 'max_payload_bytes': 2048},
     'gripper_controller': {
         'tolerance': 1.0e-4, 'n_segments': 4, 'pressure_model': 'isobaric',
         'max_pressure': 3.5e5, 'slew_rate_pa_s': 3.0e5, 'approach_rate_pa_s': 1.0e5, 'kp': 0.8,
@@ -50,7 +54,9 @@ CHANGED = {
         'goal_tolerance_m': 0.002, 'force_tolerance': 0.1, 'settle_time_s': 0.2,
         'stall_timeout_s': 8.0, 'feedback_timeout_s': 0.8, 'safe_state': 'hold',
         'contact_threshold_n': 0.03, 'object': 'sphere', 'object_diameter': 0.05,
-        'object_height': 0.002, 'atmospheric_pressure': 100000.0, 'frame_prefix': 'left/'},
+        'object_height': 0.002, 'atmospheric_pressure': 100000.0, 'frame_prefix': 'left/',
+        'min_absolute_pressure': 2.0e4, 'max_tip_force': 2.5, 'max_frame_id_length': 64,
+        'max_payload_bytes': 2048},
     'mcap_recorder': {
         'output_path': '{tmp}/changed.mcap', 'overwrite': True, 'topics': ['/x', 'other'],
         'gripper_config': GRIPPER, 'flush_period_s': 0.5, 'max_file_size_mb': 10.0,
