@@ -252,8 +252,7 @@ class McapFile(_TopicChecks):
             raise TruncatedFileError(
                 f'{self.path}: has no summary section; '
                 f'run "fpc-mcap recover {self.path} OUT" to rebuild its index')
-        with _damaged(self.path, 'damaged summary'):
-            self._topics = self._build_topics()
+        self._topics = self._build_topics()
 
     def _build_topics(self):
         stats = self.summary.statistics
@@ -335,7 +334,8 @@ class McapFile(_TopicChecks):
         UnknownTopicError, MissingSchemaError
             Before the first message, for a bad topic list.
         CorruptFileError
-            When a damaged chunk or message is met.
+            For a schema that cannot be parsed (before the first message), or when a
+            damaged chunk or message is met.
 
         """
         topics = list(self._topics) if topics is None else list(topics)
