@@ -1,6 +1,7 @@
 """Helpers of the MCAP tests: sample messages, field-by-field comparison, independent reading."""
 
 import array
+import functools
 import pathlib
 import shutil
 
@@ -234,6 +235,12 @@ TOPICS = ('finger_0/pressure_command', 'finger_0/pressure', 'finger_0/curvature'
           'finger_0/shape', '/diagnostics')
 
 
+@functools.lru_cache(maxsize=None)
+def _rosbags_store():
+    from rosbags.typesys import get_typestore, Stores
+    return get_typestore(Stores.ROS2_JAZZY)
+
+
 def canonical_cdr(message):
     """
     CDR of a message with zero alignment padding: the same bytes on every run.
@@ -241,9 +248,7 @@ def canonical_cdr(message):
     rclpy's serialize_message leaves the padding uninitialised, so files of the same
     messages differ from run to run; rosbags writes zeros.
     """
-    from rosbags.typesys import get_typestore, Stores
-
-    store = get_typestore(Stores.ROS2_JAZZY)
+    store = _rosbags_store()
     name = type_name_of(message)
     return bytes(store.serialize_cdr(store.deserialize_cdr(serialize_message(message), name),
                                      name))
