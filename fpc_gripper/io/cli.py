@@ -631,10 +631,18 @@ def _run(args, out, err):
     elif args.command == 'recover':
         report = recover(args.input, args.output, compression=args.compression,
                          overwrite=args.force)
-        state = 'complete' if report.complete else f'cut off ({report.dropped_bytes} bytes lost)'
+        if not report.complete:
+            state = f'cut off or damaged ({report.dropped_bytes} bytes unreadable)'
+        elif report.indexed_chunks:
+            state = f'damaged ({report.indexed_chunks} chunks read through its index)'
+        else:
+            state = 'complete'
+        lost = f'{report.lost_messages} messages lost' + (
+            f', and those of {report.uncounted_chunks} chunks without a readable message index'
+            if report.uncounted_chunks else '')
         print(f'recovered {report.messages} messages from {report.chunks} chunks of '
-              f'{report.files} file{"s" * (report.files != 1)}; input was '
-              f'{state}; {report.corrupt_chunks} damaged chunks skipped, '
+              f'{report.files} file{"s" * (report.files != 1)}; input was {state}; '
+              f'{report.corrupt_chunks} damaged chunks skipped ({lost}), '
               f'{report.skipped_messages} messages without schema skipped -> {args.output}',
               file=out)
     elif args.command == 'replay-model':

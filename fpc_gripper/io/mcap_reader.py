@@ -1,21 +1,23 @@
 """MCAP reading (single files and rosbag2 bag directories), and recovery after a crash."""
 
+import contextlib
 import dataclasses
 import heapq
 import io
+import os
 import pathlib
 import re
 import struct
 import zlib
 
 from mcap.data_stream import ReadDataStream
-from mcap.exceptions import McapError
 from mcap.opcode import Opcode
-from mcap.reader import make_reader
-from mcap.records import Channel, Chunk, Header, Message, Metadata, Schema
+from mcap.reader import SeekingReader
+from mcap.records import Channel, Chunk, Message, MessageIndex, Metadata, Schema
 from mcap.stream_reader import breakup_chunk
 from mcap_ros2.decoder import DecoderFactory
 import yaml
+import zstandard
 
 from .mcap_writer import atomic_mcap_writer, MESSAGE_ENCODING, SCHEMA_ENCODING
 
@@ -29,9 +31,16 @@ _MAGIC = bytes((137, 77, 67, 65, 80, 48, 13, 10))
 _FOOTER_RECORD_SIZE = 1 + 8 + 8 + 8 + 4
 _BAG_METADATA = 'metadata.yaml'
 _SPLIT_INDEX = re.compile(r'_(\d+)\.mcap$')
-# Everything a damaged file can make the mcap library raise while parsing.
-_PARSE_ERRORS = (McapError, struct.error, ValueError, EOFError, KeyError, IndexError,
-                 UnicodeDecodeError, RuntimeError, MemoryError, zlib.error)
+# The mcap library, its decompressors and the CDR decoder were not written for hostile
+# bytes: besides McapError they raise struct, zstd, lz4 (RuntimeError), zlib, Unicode,
+# Key, Index, Type, Overflow and Memory errors, among others. Whatever they raise while
+# parsing a file's bytes means that the bytes are damaged; `_damaged` says so, naming the
+# file. Only the parsing calls are guarded, never this package's own code.
+_PARSE_ERRORS = (Exception,)
+#: Bound of a chunk's uncompressed size [bytes]: a damaged size must not allocate exabytes.
+_MAX_CHUNK_BYTES = 1 << 30
+#: Opcodes of the MCAP records (0x80 and up are private records, skipped).
+_KNOWN_OPCODES = frozenset(int(op) for op in Opcode)
 
 
 class McapInputError(Exception):
@@ -52,6 +61,41 @@ class MissingSchemaError(McapInputError):
 
 class UnknownTopicError(McapInputError):
     """A requested topic is not in the file."""
+
+
+def _one_line(error, limit=200):
+    text = ' '.join(str(error).split())
+    return f'{type(error).__name__}: {text[:limit]}{"..." if len(text) > limit else ""}'
+
+
+@contextlib.contextmanager
+def _damaged(path, what, hint=''):
+    """Raise what the mcap library raises on damaged bytes as one CorruptFileError line."""
+    try:
+        yield
+    except McapInputError:
+        raise
+    except _PARSE_ERRORS as err:
+        raise CorruptFileError(f'{path}: {what} ({_one_line(err)}){hint}') from None
+
+
+class _SizedFile(io.BufferedReader):
+    """
+    A file opened for reading whose large reads past its end fail before they allocate.
+
+    A damaged length field can ask the mcap library for up to 2**64 bytes, which
+    ``read`` would try to allocate before finding the end of the file.
+    """
+
+    def __init__(self, path):
+        super().__init__(io.FileIO(path, 'rb'))
+        self.size = os.fstat(self.fileno()).st_size
+
+    def read(self, size=-1):
+        """Read like BufferedReader, but refuse a read larger than what is left."""
+        if size is not None and size > 4096 and size > self.size - self.tell():
+            raise EOFError(f'a record asks for {size} bytes, beyond the end of the file')
+        return super().read(size)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -173,7 +217,7 @@ class McapFile(_TopicChecks):
     def __init__(self, path):
         self.path = pathlib.Path(path)
         try:
-            self._stream = open(self.path, 'rb')
+            self._stream = _SizedFile(self.path)
         except FileNotFoundError:
             raise McapInputError(f'{self.path}: no such file') from None
         except IsADirectoryError:
@@ -198,13 +242,12 @@ class McapFile(_TopicChecks):
                 f'{self.path}: truncated, no footer or summary (was the recorder killed?); '
                 f'run "fpc-mcap recover {self.path} OUT" to rebuild its index')
         self._stream.seek(0)
-        try:
-            self._reader = make_reader(self._stream, validate_crcs=True,
-                                       decoder_factories=[DecoderFactory()])
+        with _damaged(self.path, 'damaged header or summary'):
+            self._reader = SeekingReader(self._stream, validate_crcs=True,
+                                         decoder_factories=[DecoderFactory()],
+                                         record_size_limit=size)
             self.header = self._reader.get_header()
             self.summary = self._reader.get_summary()
-        except _PARSE_ERRORS as err:
-            raise CorruptFileError(f'{self.path}: damaged header or summary ({err})') from None
         if self.summary is None:
             raise TruncatedFileError(
                 f'{self.path}: has no summary section; '
@@ -266,10 +309,8 @@ class McapFile(_TopicChecks):
             Name and key-value pairs of each record.
 
         """
-        try:
+        with _damaged(self.path, 'damaged metadata record'):
             return [(m.name, dict(m.metadata)) for m in self._reader.iter_metadata()]
-        except _PARSE_ERRORS as err:
-            raise CorruptFileError(f'{self.path}: damaged metadata record ({err})') from None
 
     # -- messages -----------------------------------------------------------------------
 
@@ -293,27 +334,37 @@ class McapFile(_TopicChecks):
         UnknownTopicError, MissingSchemaError
             Before the first message, for a bad topic list.
         CorruptFileError
-            When a damaged chunk or message is met.
+            For a schema that cannot be parsed (before the first message), or when a
+            damaged chunk or message is met.
 
         """
         topics = list(self._topics) if topics is None else list(topics)
         self.check_topics(topics)
-        if decode:
-            self.check_decodable(topics)
-        decoders = DecoderFactory()
-        try:
+        decoders = self._decoders(topics) if decode else {}
+        with _damaged(self.path, 'damaged data', '; "fpc-mcap recover" keeps the readable '
+                                                 'chunks'):
             for schema, channel, message in self._reader.iter_messages(topics=topics):
                 ros_msg = None
                 if decode:
-                    decoder = decoders.decoder_for(channel.message_encoding, schema)
-                    ros_msg = decoder(message.data)
+                    ros_msg = decoders[channel.id](message.data)
                 yield RecordedMessage(
                     topic=channel.topic, type_name=schema.name if schema else '',
                     log_time=message.log_time, publish_time=message.publish_time,
                     sequence=message.sequence, data=message.data, ros_msg=ros_msg)
-        except _PARSE_ERRORS as err:
-            raise CorruptFileError(f'{self.path}: damaged data ({type(err).__name__}: {err}); '
-                                   f'"fpc-mcap recover" keeps the readable chunks') from None
+
+    def _decoders(self, topics):
+        """Build the decoder of each topic's channel: a damaged schema fails here, named."""
+        self.check_decodable(topics)
+        factory = DecoderFactory()
+        decoders = {}
+        for channel in self.summary.channels.values():
+            if channel.topic in topics:
+                schema = self.summary.schemas.get(channel.schema_id)
+                # The rosidl parser that mcap_ros2 vendors prints its error, then raises it.
+                with _damaged(self.path, f'damaged schema of {channel.topic}'), \
+                        contextlib.redirect_stderr(io.StringIO()):
+                    decoders[channel.id] = factory.decoder_for(channel.message_encoding, schema)
+        return decoders
 
     def schema(self, topic):
         """Return the Schema record (name, encoding, data) of a topic's channel, or None."""
@@ -488,13 +539,22 @@ class RecoveryReport:
     chunks : int
         Readable chunks.
     corrupt_chunks : int
-        Chunks skipped because their CRC or compression failed.
+        Chunks skipped because their CRC, compression or record failed.
+    lost_messages : int
+        Messages of the skipped chunks, as their message indexes count them.
+    uncounted_chunks : int
+        Skipped chunks whose message index was unreadable too (their messages are not in
+        `lost_messages`).
+    indexed_chunks : int
+        Chunks read through the summary's chunk index, after a damaged record ended the
+        record-by-record read (the output has them too).
     skipped_messages : int
         Messages of channels without a usable schema.
     complete : bool
         Whether every input file had its footer (none was cut off).
     dropped_bytes : int
-        Bytes after the last whole record of each file that could not be read [bytes].
+        Bytes after the last whole record of each cut-off file that could not be read
+        [bytes].
     topics : dict of str to int
         Messages per topic in the output.
     files : int
@@ -505,48 +565,52 @@ class RecoveryReport:
     messages: int = 0
     chunks: int = 0
     corrupt_chunks: int = 0
+    lost_messages: int = 0
+    uncounted_chunks: int = 0
+    indexed_chunks: int = 0
     skipped_messages: int = 0
     complete: bool = False
     dropped_bytes: int = 0
     topics: dict = dataclasses.field(default_factory=dict)
     files: int = 0
 
-
-def _records(stream, size, report):
-    """Yield (opcode, body) of every whole record after the magic; stop at a cut-off one."""
-    offset = len(_MAGIC)
-    while True:
-        head = stream.read(9)
-        if len(head) < 9:
-            report.dropped_bytes = size - offset
-            return
-        opcode, length = struct.unpack('<BQ', head)
-        if length > size - offset - 9:
-            report.dropped_bytes = size - offset
-            return
-        body = stream.read(length)
-        offset += 9 + length
-        yield opcode, body
-        if opcode in (Opcode.DATA_END, Opcode.FOOTER):
-            report.complete = True
-            report.dropped_bytes = 0
-            return
+    @property
+    def damaged(self):
+        """Whether anything of the input could not be read."""
+        return bool(not self.complete or self.corrupt_chunks or self.indexed_chunks
+                    or self.skipped_messages)
 
 
 def _parse(cls, body, *args):
     return cls.read(ReadDataStream(io.BytesIO(body)), *args)
 
 
+def _chunk_records(chunk):
+    """The records of a chunk, its CRC checked; refuses a size that cannot be true."""
+    if chunk.uncompressed_size > _MAX_CHUNK_BYTES:
+        raise CorruptFileError(f'a chunk claims {chunk.uncompressed_size} bytes')
+    if chunk.compression == 'zstd':
+        # zstd allocates the size its frame header claims, whatever the chunk says.
+        claimed = zstandard.frame_content_size(chunk.data)
+        if claimed not in (-1, chunk.uncompressed_size):
+            raise CorruptFileError(f'a zstd frame claims {claimed} bytes, its chunk '
+                                   f'{chunk.uncompressed_size}')
+    return breakup_chunk(chunk, validate_crc=True)
+
+
 def recover(in_path, out_path, *, compression='zstd', overwrite=False):
     """
-    Rewrite a possibly truncated recording into one complete, indexed MCAP file.
+    Rewrite a possibly truncated or damaged recording into one complete, indexed MCAP file.
 
-    Reads each file record by record up to its last whole record; chunks whose CRC or
-    decompression fails are skipped and counted. Schemas, channels (with their metadata),
-    messages and metadata records are written to `out_path` in rosbag2's form with a
-    fresh summary, index and ``rosbag2`` metadata record (which names `out_path`). The
-    output is written to a temporary file beside `out_path` and moved into place only
-    when complete.
+    Reads each file record by record up to its last whole record; chunks whose record,
+    CRC or decompression fails are skipped, and their messages counted from their message
+    indexes. A record whose length or opcode is damaged ends that read (nothing after it
+    can be trusted); if the file still has its summary (footer and summary CRC intact),
+    every chunk after it is then read at the offset and length its chunk index gives.
+    Schemas, channels (with their metadata), messages and metadata records are written to
+    `out_path` in rosbag2's form with a fresh summary, index and ``rosbag2`` metadata
+    record (which names `out_path`). The output is written to a temporary file beside
+    `out_path` and moved into place only when complete.
 
     Parameters
     ----------
@@ -567,7 +631,8 @@ def recover(in_path, out_path, *, compression='zstd', overwrite=False):
     Raises
     ------
     McapInputError
-        If the input is missing, not MCAP, or has no readable message at all.
+        If the input is missing or not MCAP, or if it is damaged and not one message of
+        it can be read (nothing is written then).
     FileExistsError
         If `out_path` exists and `overwrite` is false.
 
@@ -585,90 +650,244 @@ def recover(in_path, out_path, *, compression='zstd', overwrite=False):
             report.files += 1
             report.complete &= part.complete
             report.dropped_bytes += part.dropped_bytes
-        if report.messages == 0 and report.corrupt_chunks:
-            raise CorruptFileError(f'{in_path}: no readable chunk '
-                                   f'({report.corrupt_chunks} damaged)')
+        if report.messages == 0 and report.damaged:
+            raise CorruptFileError(f'{in_path}: nothing recoverable, not one readable message '
+                                   f'({_damage_summary(report)})')
     return report
+
+
+def _damage_summary(report):
+    parts = []
+    if not report.complete:
+        parts.append(f'cut off, {report.dropped_bytes} bytes unreadable')
+    if report.corrupt_chunks:
+        parts.append(f'{report.corrupt_chunks} damaged chunks')
+    if report.skipped_messages:
+        parts.append(f'{report.skipped_messages} messages without schema')
+    return ', '.join(parts) or 'no message in it'
 
 
 def _recover_file(path, writer, report):
     """Copy what is readable of one file; return its own report (completeness, bytes lost)."""
     try:
-        stream = open(path, 'rb')
+        stream = _SizedFile(path)
     except IsADirectoryError:
         raise McapInputError(f'{path}: is a directory, not an MCAP file') from None
     with stream:
-        size = path.stat().st_size
-        if size == 0:
+        if stream.size == 0:
             raise CorruptFileError(f'{path}: empty file, not an MCAP file')
         if stream.read(len(_MAGIC)) != _MAGIC:
             raise CorruptFileError(f'{path}: not an MCAP file (bad magic bytes)')
         part = RecoveryReport()
-        _copy_records(stream, size, writer, part, report)
+        _Salvage(stream, writer, part, report).run()
     return part
 
 
-def _copy_records(stream, size, writer, part, report):
-    """Copy one file's readable records; `part` gets its completeness, `report` the counts."""
-    schemas = {}
-    channels = {}
+def _summary(stream):
+    """
+    The summary of a file whose footer and summary CRC are intact, or None.
 
-    def add_channel(channel):
-        channels[channel.id] = channel
-        schema = schemas.get(channel.schema_id)
+    A damaged summary is worse than none: its chunk offsets would be trusted.
+    """
+    size = stream.size
+    footer_at = size - len(_MAGIC) - _FOOTER_RECORD_SIZE
+    if footer_at < len(_MAGIC):
+        return None
+    stream.seek(footer_at)
+    tail = stream.read(_FOOTER_RECORD_SIZE + len(_MAGIC))
+    if tail[-len(_MAGIC):] != _MAGIC or tail[:9] != struct.pack('<BQ', Opcode.FOOTER, 20):
+        return None
+    summary_start, _, crc = struct.unpack_from('<QQI', tail, 9)
+    if not len(_MAGIC) < summary_start < footer_at:
+        return None
+    stream.seek(summary_start)
+    covered = stream.read(footer_at - summary_start) + tail[:_FOOTER_RECORD_SIZE - 4]
+    if crc and zlib.crc32(covered) != crc:
+        return None
+    try:
+        stream.seek(0)
+        return SeekingReader(stream, record_size_limit=size).get_summary()
+    except _PARSE_ERRORS:
+        return None
+
+
+class _Salvage:
+    """
+    Copy the readable records of one file into a writer.
+
+    `part` gets the file's completeness and bytes lost, `report` the counts.
+    """
+
+    def __init__(self, stream, writer, part, report):
+        self.stream = stream
+        self.writer = writer
+        self.part = part
+        self.report = report
+        self.schemas = {}
+        self.channels = {}
+        self.summary = _summary(stream)
+        self.chunk_index = {} if self.summary is None else {
+            c.chunk_start_offset: c for c in self.summary.chunk_indexes}
+        # Offsets of the chunks that the record-by-record read met.
+        self.seen = set()
+
+    def run(self):
+        """Read record by record; after a damaged record, read the rest by the index."""
+        if self.summary is not None:
+            for record in (*self.summary.schemas.values(), *self.summary.channels.values()):
+                self.handle(record)
+        self.sequential()
+        for offset, index in sorted(self.chunk_index.items()):
+            if offset not in self.seen:
+                self.report.indexed_chunks += 1
+                self.indexed_chunk(index)
+
+    def sequential(self):
+        """Copy whole records from the magic on; stop at the end, a cut or a damaged record."""
+        size = self.stream.size
+        offset = len(_MAGIC)
+        self.stream.seek(offset)
+        # A skipped chunk's messages are counted by the message indexes after it:
+        # None when there is no skipped chunk, else whether they counted it.
+        skipped = None
+        while True:
+            head = self.stream.read(9)
+            if len(head) < 9:
+                break
+            opcode, length = struct.unpack('<BQ', head)
+            if length > size - offset - 9 or not self.plausible(opcode, offset, length):
+                break
+            body = self.stream.read(length)
+            start, offset = offset, offset + 9 + length
+            if opcode == Opcode.MESSAGE_INDEX:
+                if skipped is not None:
+                    skipped = self.count_lost(body) or skipped
+                continue
+            self.settle(skipped)
+            skipped = None
+            if opcode == Opcode.CHUNK:
+                self.seen.add(start)
+                if not self.chunk(body):
+                    skipped = False
+                continue
+            self.record(opcode, body)
+            if opcode in (Opcode.DATA_END, Opcode.FOOTER):
+                self.part.complete = True
+                return
+        self.settle(skipped)
+        # Cut off, or a damaged record: what follows is lost unless the index has it.
+        self.part.complete = self.summary is not None
+        if self.summary is None:
+            self.part.dropped_bytes = size - offset
+
+    def plausible(self, opcode, offset, length):
+        """Whether a record header can be trusted (a damaged length misaligns the rest)."""
+        if opcode not in _KNOWN_OPCODES and opcode < 0x80:
+            return False
+        if opcode == Opcode.CHUNK and self.chunk_index:
+            index = self.chunk_index.get(offset)
+            return index is not None and index.chunk_length == 9 + length
+        # Writers put every message of a chunked file in a chunk, where a CRC checks it;
+        # one outside is bytes read out of step, and would be copied as a message.
+        return opcode != Opcode.MESSAGE or not (self.chunk_index or self.seen)
+
+    def settle(self, skipped):
+        if skipped is False:
+            self.report.uncounted_chunks += 1
+
+    def count_lost(self, body):
+        """Add the messages of a skipped chunk's message index record; False if unreadable."""
+        try:
+            self.report.lost_messages += len(_parse(MessageIndex, body).records)
+        except _PARSE_ERRORS:
+            return False
+        return True
+
+    def chunk(self, body):
+        """Copy the records of one chunk record's body; False (and counted) if damaged."""
+        try:
+            records = _chunk_records(_parse(Chunk, body))
+        except _PARSE_ERRORS:
+            self.report.corrupt_chunks += 1
+            return False
+        self.report.chunks += 1
+        for record in records:
+            self.handle(record)
+        return True
+
+    def indexed_chunk(self, index):
+        """Copy a chunk at the offset and length its chunk index gives, or count it lost."""
+        body = self.read_record(Opcode.CHUNK, index.chunk_start_offset, index.chunk_length)
+        if body is None:
+            self.report.corrupt_chunks += 1
+        elif self.chunk(body):
+            return
+        counted = True
+        for offset in index.message_index_offsets.values():
+            found = self.read_record(Opcode.MESSAGE_INDEX, offset)
+            counted = counted and found is not None and self.count_lost(found)
+        self.settle(None if counted else False)
+
+    def read_record(self, opcode, offset, length=None):
+        """The body of the record of an opcode at an offset (and full length), or None."""
+        size = self.stream.size
+        if not len(_MAGIC) <= offset <= size - 9:
+            return None
+        self.stream.seek(offset)
+        found, body_length = struct.unpack('<BQ', self.stream.read(9))
+        if length is not None:
+            body_length = length - 9     # the index's length: the record's may be damaged
+        if found != opcode or not 0 <= body_length <= size - offset - 9:
+            return None
+        return self.stream.read(body_length)
+
+    def record(self, opcode, body):
+        """Copy a schema, channel, message or metadata record met outside a chunk."""
+        kinds = {Opcode.SCHEMA: Schema, Opcode.CHANNEL: Channel, Opcode.MESSAGE: Message,
+                 Opcode.METADATA: Metadata}
+        kind = kinds.get(opcode)
+        if kind is None:
+            return
+        try:
+            record = _parse(kind, body, len(body)) if kind is Message else _parse(kind, body)
+        except _PARSE_ERRORS:
+            return
+        if kind is not Metadata:
+            self.handle(record)
+        elif record.name != 'rosbag2':
+            # The output gets a rosbag2 record of its own on close.
+            self.writer.add_metadata(record.name, record.metadata)
+
+    def handle(self, record):
+        """Register a schema or channel, or write a message of a known channel."""
+        if isinstance(record, Schema):
+            self.schemas[record.id] = record
+        elif isinstance(record, Channel):
+            self.add_channel(record)
+        elif isinstance(record, Message):
+            self.add_message(record)
+
+    def add_channel(self, channel):
+        self.channels[channel.id] = channel
+        schema = self.schemas.get(channel.schema_id)
         if schema is None or not schema.name:
             return
         try:
-            writer.add_topic(channel.topic, schema.name, definition=schema.data.decode(),
-                             schema_encoding=schema.encoding,
-                             offered_qos_profiles=channel.metadata.get(
-                                 'offered_qos_profiles', ''),
-                             type_hash=channel.metadata.get('topic_type_hash', ''))
+            self.writer.add_topic(
+                channel.topic, schema.name, definition=schema.data.decode(),
+                schema_encoding=schema.encoding,
+                offered_qos_profiles=channel.metadata.get('offered_qos_profiles', ''),
+                type_hash=channel.metadata.get('topic_type_hash', ''))
         except (ValueError, UnicodeDecodeError):
             return
 
-    def add_message(message):
-        channel = channels.get(message.channel_id)
-        if channel is None or channel.topic not in writer.topics:
+    def add_message(self, message):
+        channel = self.channels.get(message.channel_id)
+        report = self.report
+        if channel is None or channel.topic not in self.writer.topics:
             report.skipped_messages += 1
             return
-        writer.write(channel.topic, message.data, message.log_time, message.publish_time,
-                     message.sequence)
+        self.writer.write(channel.topic, message.data, message.log_time, message.publish_time,
+                          message.sequence)
         report.messages += 1
         report.topics[channel.topic] = report.topics.get(channel.topic, 0) + 1
-
-    def handle(record):
-        if isinstance(record, Schema):
-            schemas[record.id] = record
-        elif isinstance(record, Channel):
-            add_channel(record)
-        elif isinstance(record, Message):
-            add_message(record)
-
-    for opcode, body in _records(stream, size, part):
-        try:
-            if opcode == Opcode.HEADER:
-                _parse(Header, body)
-            elif opcode == Opcode.SCHEMA:
-                handle(_parse(Schema, body))
-            elif opcode == Opcode.CHANNEL:
-                handle(_parse(Channel, body))
-            elif opcode == Opcode.MESSAGE:
-                handle(_parse(Message, body, len(body)))
-            elif opcode == Opcode.METADATA:
-                record = _parse(Metadata, body)
-                if record.name != 'rosbag2':
-                    writer.add_metadata(record.name, record.metadata)
-            elif opcode == Opcode.CHUNK:
-                chunk = _parse(Chunk, body)
-                inner = breakup_chunk(chunk, validate_crc=True)
-            else:
-                continue
-        except _PARSE_ERRORS:
-            if opcode == Opcode.CHUNK:
-                report.corrupt_chunks += 1
-            continue
-        if opcode == Opcode.CHUNK:
-            report.chunks += 1
-            for record in inner:
-                handle(record)

@@ -399,6 +399,17 @@ def _bag_metadata(topics, counts, start, end, files, ros_distro):
     }
 
 
+def _time_ns(name, value):
+    """Check a record time: MCAP stores it as an unsigned 64-bit count of nanoseconds."""
+    try:
+        valid = not isinstance(value, bool) and int(value) == value and 0 <= value < 2**64
+    except (TypeError, ValueError, OverflowError):
+        valid = False
+    if not valid:
+        raise ValueError(f'`{name}` must be an integer in [0, 2**64) [ns], got {value!r}')
+    return int(value)
+
+
 class _File:
     """One open MCAP file and its own statistics."""
 
@@ -519,8 +530,9 @@ class Rosbag2McapWriter:
     @property
     def message_count(self):
         """Messages written, over every file."""
-        done = sum(f['message_count'] for f in self._files)
-        return done + (sum(self._file.counts.values()) if self._file else 0)
+        with self._lock:
+            done = sum(f['message_count'] for f in self._files)
+            return done + (sum(self._file.counts.values()) if self._file else 0)
 
     @property
     def pending_count(self):
@@ -591,19 +603,25 @@ class Rosbag2McapWriter:
         data : bytes
             CDR-serialised message.
         log_time : int
-            Receive time [ns].
+            Receive time, in [0, 2**64) [ns].
         publish_time : int, optional
-            Publish (header) time [ns]; defaults to `log_time`.
+            Publish (header) time, in [0, 2**64) [ns]; defaults to `log_time`.
         sequence : int, optional
             Sequence number; defaults to a per-topic counter from 1.
+
+        Raises
+        ------
+        ValueError
+            If a time is out of range, naming it; nothing is written then.
 
         """
         with self._lock:
             self._check_open()
             if topic not in self._topics:
                 raise McapWriterError(f'topic {topic!r} was not added with add_topic()')
-            log_time = int(log_time)
-            publish_time = log_time if publish_time is None else int(publish_time)
+            log_time = _time_ns('log_time', log_time)
+            publish_time = log_time if publish_time is None else _time_ns('publish_time',
+                                                                          publish_time)
             if self._should_split(log_time):
                 self._close_file()
                 self._open_next()

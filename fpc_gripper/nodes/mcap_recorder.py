@@ -6,23 +6,32 @@ import struct
 import sys
 import time
 
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 import rclpy
+from rclpy.exceptions import InvalidHandle
+from rclpy.impl.implementation_singleton import rclpy_implementation
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from .parameters import float_range
 from .runner import run_node
-from ..io.mcap_writer import (normalize_type_name, Rosbag2McapWriter, SchemaNotFoundError,
-                              type_description_hash)
+from ..io.background_writer import BackgroundWriter
+from ..io.mcap_writer import (McapWriterError, normalize_type_name, Rosbag2McapWriter,
+                              SchemaNotFoundError, type_description_hash)
 from ..io.messages import gripper_topics
 
 __all__ = ['McapRecorder', 'main']
 
 _COMPRESSIONS = ('zstd', 'lz4', 'none')
 _DEFAULT_FINGERS = ('finger_0', 'finger_1', 'finger_2')
-# Depth of the recorder's subscriptions: room for bursts while a chunk is compressed.
-_SUBSCRIPTION_DEPTH = 100
+# Depth of the recorder's subscriptions: 5 s of a 200 Hz topic. The middleware fills it
+# only while the executor lags (a CPU hog, a burst), and then it is what keeps the
+# messages: at 100, a loaded recorder lost hundreds. It costs memory only when used.
+_SUBSCRIPTION_DEPTH = 1000
+_RCLError = rclpy_implementation.RCLError
+_DIAGNOSTICS_QOS = QoSProfile(depth=10, history=HistoryPolicy.KEEP_LAST,
+                              reliability=ReliabilityPolicy.RELIABLE)
 
 
 def _message_class(type_name):
@@ -71,20 +80,33 @@ class McapRecorder(Node):
     Record a list of topics to MCAP, subscribing to each with a QoS its publishers accept.
 
     Topics without a publisher yet are looked for again every ``discovery_period_s``.
-    Every ``flush_period_s / 2`` the open chunk is closed and written with its index and
-    the file is fsync'ed, so a ``kill -9`` loses at most the last ``flush_period_s`` of
-    messages. Destroying the node (`main` does on SIGINT and SIGTERM, once or repeated)
-    writes the summary and index.
+    Callbacks only queue the raw CDR with its receive time (a `BackgroundWriter`); its
+    thread compresses the chunks and, every ``flush_period_s / 2``, closes the open chunk,
+    writes it with its index and fsyncs the file, so a ``kill -9`` loses at most the last
+    ``flush_period_s`` of messages. Destroying the node (`main` does on SIGINT and
+    SIGTERM, once or repeated) takes what is left in the subscriptions' queues, writes
+    it, then the summary and index.
+
+    Message content never stops it: log time is the node clock at reception, and a
+    header stamp that is not a valid time (negative seconds, nanoseconds past a second)
+    is kept as it is in the payload while the record's publish time falls back to the
+    log time; such stamps are counted (`invalid_stamps`). Messages dropped because the
+    queue was full (``max_queue_mb``) and failed writes are counted too, logged, and
+    reported on ``/diagnostics`` every ``diagnostics_period_s``.
     """
 
     def __init__(self, **kwargs):
         super().__init__('mcap_recorder', **kwargs)
         self._writer = None
+        self._background = None
         self._subs = {}
         self._stamped = {}
-        self._flush_timer = None
         self._params = {}
-        self._write_errors = 0
+        self.invalid_stamps = 0
+        self._refused = 0
+        self._diagnostics_pub = None
+        self._last_error = None
+        self._reported = (0, 0, 0)
         self.add_on_set_parameters_callback(self._validate_parameters)
         self.add_post_set_parameters_callback(self._store_parameters)
         self._declare_parameters()
@@ -96,7 +118,14 @@ class McapRecorder(Node):
             max_file_size=int(p['max_file_size_mb'] * 1024 * 1024),
             max_duration=int(p['max_duration_s'] * 1e9), overwrite=p['overwrite'],
             library='fpc_gripper mcap_recorder (mcap-python)')
-        self._restart_flush_timer()
+        self._background = BackgroundWriter(
+            self._writer, flush_period_s=p['flush_period_s'],
+            max_queue_bytes=int(p['max_queue_mb'] * 1024 * 1024), on_error=self._write_failed)
+        if p['diagnostics_period_s'] > 0.0:
+            self._diagnostics_pub = self.create_publisher(DiagnosticArray, '/diagnostics',
+                                                          _DIAGNOSTICS_QOS)
+        # Losses are logged once a period even without diagnostics.
+        self.create_timer(p['diagnostics_period_s'] or 1.0, self._report_health)
         self._discovery_timer = self.create_timer(p['discovery_period_s'], self._discover)
         self._discover()
         self.get_logger().info(
@@ -135,6 +164,14 @@ class McapRecorder(Node):
                         '(default: the package default)', read_only=True))
         self.declare_parameter('overwrite', False, ParameterDescriptor(
             description='Replace an existing output file', read_only=True))
+        self.declare_parameter('diagnostics_period_s', 1.0, ParameterDescriptor(
+            description='Period of the status on /diagnostics (recorded too if /diagnostics '
+                        'is among the topics) [s]; 0 publishes none',
+            floating_point_range=float_range(0.0, 3600.0), read_only=True))
+        self.declare_parameter('max_queue_mb', 100.0, ParameterDescriptor(
+            description='Bound of the messages received but not yet written [MiB]; a '
+                        'message that finds it full is dropped and counted',
+            floating_point_range=float_range(1.0, 1.0e6), read_only=True))
 
     def _validate_parameters(self, parameters):
         for param in parameters:
@@ -154,8 +191,7 @@ class McapRecorder(Node):
         if self._writer is not None:
             self._writer.max_file_size = int(self._params['max_file_size_mb'] * 1024 * 1024)
             self._writer.max_duration = int(self._params['max_duration_s'] * 1e9)
-            if any(p.name == 'flush_period_s' for p in parameters):
-                self._restart_flush_timer()
+            self._background.flush_period_s = self._params['flush_period_s']
 
     def _topic_list(self):
         topics = self._params['topics']
@@ -180,20 +216,6 @@ class McapRecorder(Node):
             return list(_DEFAULT_FINGERS)
 
     # -- recording ------------------------------------------------------------------------
-
-    def _restart_flush_timer(self):
-        if self._flush_timer is not None:
-            self.destroy_timer(self._flush_timer)
-        # Half the period: a message waits at most one tick plus the timer's jitter.
-        self._flush_timer = self.create_timer(0.5 * self._params['flush_period_s'],
-                                              self._flush)
-
-    def _flush(self):
-        if self._writer is not None and self._writer.pending_count:
-            try:
-                self._writer.flush()
-            except OSError as error:
-                self.get_logger().error(f'flush failed: {error}', throttle_duration_sec=5.0)
 
     def _discover(self):
         for topic in self._wanted:
@@ -250,13 +272,59 @@ class McapRecorder(Node):
         if self._writer is None:
             return
         log_time = self.get_clock().now().nanoseconds
-        publish_time = _cdr_header_stamp(data) if self._stamped.get(topic) else 0
+        publish_time = log_time
+        if self._stamped.get(topic):
+            stamp = _cdr_header_stamp(data)
+            if stamp is _INVALID:
+                self.invalid_stamps += 1
+                self.get_logger().warning(
+                    f'{topic}: header stamp is not a valid time; recorded as received, '
+                    f'with the receive time as publish time ({self.invalid_stamps} so far)',
+                    throttle_duration_sec=5.0)
+            elif stamp:
+                publish_time = stamp
         try:
-            self._writer.write(topic, bytes(data), log_time, publish_time or log_time)
-        except OSError as error:
-            self._write_errors += 1
-            self.get_logger().error(f'write failed ({self._write_errors} lost): {error}',
-                                    throttle_duration_sec=5.0)
+            self._background.put(topic, bytes(data), log_time, publish_time)
+        except McapWriterError as error:
+            self._refused += 1
+            self._write_failed(error)
+
+    def _write_failed(self, error):
+        """Keep the last error for the diagnostics (called from the writer thread too)."""
+        self._last_error = f'{type(error).__name__}: {error}'
+
+    def _report_health(self):
+        background = self._background
+        if self._writer is None:
+            return
+        counts = (background.dropped, self.invalid_stamps, background.errors + self._refused)
+        dropped, invalid, errors = (now - before for now, before in zip(counts,
+                                                                        self._reported))
+        self._reported = counts
+        if errors:
+            level, message = DiagnosticStatus.ERROR, f'{errors} writes failed: {self._last_error}'
+            self.get_logger().error(f'{message} ({counts[2]} lost so far)')
+        elif dropped:
+            level, message = DiagnosticStatus.WARN, f'{dropped} messages dropped: queue full'
+            self.get_logger().warning(f'{message} ({counts[0]} so far; raise max_queue_mb)')
+        elif invalid:
+            level = DiagnosticStatus.WARN
+            message = f'{invalid} header stamps not a valid time (publish time = log time)'
+        else:
+            level, message = DiagnosticStatus.OK, 'recording'
+        if self._diagnostics_pub is None:
+            return
+        values = {'file': str(self._writer.path), 'messages written': background.written,
+                  'queued': background.queued, 'queued bytes': background.queued_bytes,
+                  'dropped (queue full)': counts[0], 'invalid stamps': counts[1],
+                  'failed writes': counts[2], 'topics': len(self._subs)}
+        array = DiagnosticArray()
+        array.header.stamp = self.get_clock().now().to_msg()
+        array.status = [DiagnosticStatus(
+            level=level, name=f'{self.get_fully_qualified_name()}: recording',
+            message=message, hardware_id=str(self._writer.path),
+            values=[KeyValue(key=k, value=str(v)) for k, v in values.items()])]
+        self._diagnostics_pub.publish(array)
 
     @property
     def writer(self):
@@ -264,21 +332,38 @@ class McapRecorder(Node):
         return self._writer
 
     @property
+    def background(self):
+        """The BackgroundWriter that writes the recording (for tests and tools)."""
+        return self._background
+
+    @property
     def recorded_topics(self):
         """Topics subscribed so far."""
         return list(self._subs)
 
     def close(self):
-        """Write the summary and index and close the file (idempotent)."""
-        if self._writer is not None:
-            writer, self._writer = self._writer, None
-            writer.close()
-            # After SIGINT/SIGTERM the context is shut down and /rosout cannot publish.
-            logger = self.get_logger() if self.context.ok() else \
-                rclpy.logging.get_logger('fpc_gripper.mcap_recorder')
-            logger.info(
-                f'closed {", ".join(str(p) for p in writer.paths)}: '
-                f'{writer.message_count} messages')
+        """Record what the subscriptions still hold, then close the file (idempotent)."""
+        if self._writer is None:
+            return
+        # Messages the middleware has received but the executor has not handed over yet
+        # are the recording's too: on a loaded machine, hundreds at a stop.
+        for topic, (subscription, _, _) in list(self._subs.items()):
+            for _ in range(_SUBSCRIPTION_DEPTH):
+                data = _take(subscription)
+                if data is None:
+                    break
+                self._on_message(topic, data)
+        writer, self._writer = self._writer, None
+        background, self._background = self._background, None
+        background.close()
+        # After SIGINT/SIGTERM the context is shut down and /rosout cannot publish.
+        logger = self.get_logger() if self.context.ok() else \
+            rclpy.logging.get_logger('fpc_gripper.mcap_recorder')
+        logger.info(
+            f'closed {", ".join(str(p) for p in writer.paths)}: {writer.message_count} '
+            f'messages; {background.dropped} dropped (queue full), '
+            f'{background.errors + self._refused} failed writes, {self.invalid_stamps} '
+            f'invalid header stamps')
 
     def destroy_node(self):
         """Close the recording, then destroy the node."""
@@ -292,17 +377,36 @@ def _starts_with_header(msg_class):
     return bool(fields) and fields[0] == ('header', 'std_msgs/Header')
 
 
+#: What `_cdr_header_stamp` returns for a stamp that is not a valid time.
+_INVALID = object()
+
+
 def _cdr_header_stamp(data):
     """
     Header stamp [ns] of a serialised message that starts with a std_msgs/Header.
 
     CDR: a 4-byte encapsulation header (byte 1 is 1 for little endian), then the
-    stamp's int32 sec and uint32 nanosec. Returns 0 if the data is too short.
+    stamp's int32 sec and uint32 nanosec. Returns 0 if the data is too short, and
+    `_INVALID` for negative seconds or nanoseconds of a second or more: no valid
+    builtin_interfaces/Time (an MCAP time is an unsigned 64-bit count).
     """
     if len(data) < 12:
         return 0
     sec, nanosec = struct.unpack_from('<iI' if data[1] == 1 else '>iI', data, 4)
+    if sec < 0 or nanosec >= 1_000_000_000:
+        return _INVALID
     return sec * 1_000_000_000 + nanosec
+
+
+def _take(subscription):
+    """Take one queued raw message from a subscription, or None if there is none."""
+    try:
+        with subscription.handle:
+            taken = subscription.handle.take_message(subscription.msg_type, subscription.raw)
+    except (InvalidHandle, _RCLError):
+        # Destroyed, or its context shut down already (an external shutdown).
+        return None
+    return None if taken is None else taken[0]
 
 
 def main(args=None):

@@ -1,6 +1,7 @@
 """Helpers of the MCAP tests: sample messages, field-by-field comparison, independent reading."""
 
 import array
+import functools
 import pathlib
 import shutil
 
@@ -11,13 +12,15 @@ from helpers import read_with_rosbags
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 import numpy as np
+from rclpy.serialization import serialize_message
 from sensor_msgs.msg import FluidPressure
 from std_msgs.msg import ColorRGBA, Float64, String
 from visualization_msgs.msg import Marker, MarkerArray
 
 import yaml
 
-from fpc_gripper.io.messages import ns_to_time, shape_message
+from fpc_gripper.io.mcap_writer import Rosbag2McapWriter, type_name_of
+from fpc_gripper.io.messages import curvature_message, ns_to_time, shape_message
 
 ATM = 101325.0
 
@@ -225,3 +228,46 @@ def assert_same_decoded(expected, actual, where='msg'):
             assert list(_as_list(b)) == list(_as_list(a)), here
         else:
             assert b == a, here
+
+
+BASE = 1_700_000_000_000_000_000
+TOPICS = ('finger_0/pressure_command', 'finger_0/pressure', 'finger_0/curvature',
+          'finger_0/shape', '/diagnostics')
+
+
+@functools.lru_cache(maxsize=None)
+def _rosbags_store():
+    from rosbags.typesys import get_typestore, Stores
+    return get_typestore(Stores.ROS2_JAZZY)
+
+
+def canonical_cdr(message):
+    """
+    CDR of a message with zero alignment padding: the same bytes on every run.
+
+    rclpy's serialize_message leaves the padding uninitialised, so files of the same
+    messages differ from run to run; rosbags writes zeros.
+    """
+    store = _rosbags_store()
+    name = type_name_of(message)
+    return bytes(store.serialize_cdr(store.deserialize_cdr(serialize_message(message), name),
+                                     name))
+
+
+def write_recording(path, n=40, period=50_000_000, chunk_size=4096,
+                    serialize=serialize_message, **kwargs):
+    """N samples of a few gripper topics at 20 Hz, plus curvature and shape of finger_1."""
+    with Rosbag2McapWriter(path, chunk_size=chunk_size, **kwargs) as writer:
+        for topic in TOPICS:
+            writer.add_topic('/' + topic.lstrip('/'), type_name_of(samples(0)[topic]))
+        writer.add_topic('/finger_1/curvature', 'std_msgs/msg/Float64')
+        writer.add_topic('/finger_1/shape', 'nav_msgs/msg/Path')
+        for i in range(n):
+            t = BASE + i * period
+            sample = samples(i)
+            for topic in TOPICS:
+                writer.write('/' + topic.lstrip('/'), serialize(sample[topic]), t + 1)
+            result = FakeResult(10.0 + 0.1 * i)
+            writer.write('/finger_1/curvature', serialize(curvature_message(result)), t)
+            writer.write('/finger_1/shape', serialize(shape_message(result, 'finger_1', t)), t)
+    return path

@@ -7,37 +7,14 @@ import shutil
 from helpers import read_with_rosbags
 import matplotlib.image
 from mcap.writer import Writer
-from mcap_test_utils import assert_rosbags_reads, FakeResult, read_independently, samples
+from mcap_test_utils import (assert_rosbags_reads, BASE, read_independently, samples,
+                             write_recording)
 import pytest
 from rclpy.serialization import serialize_message
 
 from fpc_gripper.io.cli import main
 from fpc_gripper.io.mcap_reader import McapFile
-from fpc_gripper.io.mcap_writer import Rosbag2McapWriter, type_name_of
-from fpc_gripper.io.messages import curvature_message, shape_message
-
-BASE = 1_700_000_000_000_000_000
-TOPICS = ('finger_0/pressure_command', 'finger_0/pressure', 'finger_0/curvature',
-          'finger_0/shape', '/diagnostics')
-
-
-def write_recording(path, n=40, period=50_000_000, **kwargs):
-    """N samples of a few gripper topics at 20 Hz, plus curvature and shape of finger_1."""
-    with Rosbag2McapWriter(path, chunk_size=4096, **kwargs) as writer:
-        for topic in TOPICS:
-            writer.add_topic('/' + topic.lstrip('/'), type_name_of(samples(0)[topic]))
-        writer.add_topic('/finger_1/curvature', 'std_msgs/msg/Float64')
-        writer.add_topic('/finger_1/shape', 'nav_msgs/msg/Path')
-        for i in range(n):
-            t = BASE + i * period
-            sample = samples(i)
-            for topic in TOPICS:
-                writer.write('/' + topic.lstrip('/'), serialize_message(sample[topic]), t + 1)
-            result = FakeResult(10.0 + 0.1 * i)
-            writer.write('/finger_1/curvature', serialize_message(curvature_message(result)), t)
-            writer.write('/finger_1/shape',
-                         serialize_message(shape_message(result, 'finger_1', t)), t)
-    return path
+from fpc_gripper.io.mcap_writer import Rosbag2McapWriter
 
 
 @pytest.fixture(scope='module')

@@ -1,7 +1,10 @@
 """mcap_recorder in-process: every gripper message type round-trips through a live recording."""
 
+import contextlib
 import time
 
+from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from mcap_test_utils import (assert_rosbags_reads, assert_same_fields, read_independently,
                              samples, summary_of)
 import pytest
@@ -10,6 +13,7 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, qos_profile_sensor_data, QoSProfile
+from sensor_msgs.msg import FluidPressure
 from std_msgs.msg import Float64
 import yaml
 
@@ -52,7 +56,9 @@ def test_every_message_type_round_trips(context, tmp_path):
     recorder = McapRecorder(namespace='/rt', context=context, parameter_overrides=[
         Parameter('output_path', value=str(output)),
         Parameter('flush_period_s', value=0.2),
-        Parameter('discovery_period_s', value=0.05)])
+        Parameter('discovery_period_s', value=0.05),
+        # Exact counts below: not the recorder's own status on /diagnostics.
+        Parameter('diagnostics_period_s', value=0.0)])
     executor.add_node(talker)
     executor.add_node(recorder)
     try:
@@ -117,18 +123,30 @@ def test_rejects_bad_parameters(context, tmp_path):
     assert not (tmp_path / 'x.mcap').exists()
 
 
-def test_resubscribes_when_a_best_effort_publisher_joins(context, tmp_path):
-    output = tmp_path / 'adapt.mcap'
+@contextlib.contextmanager
+def recording(context, output, topic, **parameters):
+    """A talker node and a recorder of one topic on one executor; destroyed on exit."""
     executor = SingleThreadedExecutor(context=context)
-    talker = Node('adapt_talker', context=context)
-    reliable = talker.create_publisher(Float64, '/adapt/value', 10)
+    talker = Node('talker', context=context)
     recorder = McapRecorder(context=context, parameter_overrides=[
-        Parameter('output_path', value=str(output)),
-        Parameter('topics', value=['/adapt/value']),
-        Parameter('discovery_period_s', value=0.05)])
+        Parameter('output_path', value=str(output)), Parameter('topics', value=[topic]),
+        Parameter('discovery_period_s', value=0.05),
+        *(Parameter(name, value=value) for name, value in parameters.items())])
     executor.add_node(talker)
     executor.add_node(recorder)
     try:
+        yield executor, talker, recorder
+    finally:
+        executor.remove_node(recorder)
+        recorder.destroy_node()
+        talker.destroy_node()
+        executor.shutdown()
+
+
+def test_resubscribes_when_a_best_effort_publisher_joins(context, tmp_path):
+    output = tmp_path / 'adapt.mcap'
+    with recording(context, output, '/adapt/value') as (executor, talker, recorder):
+        reliable = talker.create_publisher(Float64, '/adapt/value', 10)
         assert spin_until(executor, lambda: reliable.get_subscription_count() == 1)
         reliable.publish(Float64(data=1.0))
         assert spin_until(executor, lambda: recorder.writer.message_count == 1)
@@ -140,10 +158,43 @@ def test_resubscribes_when_a_best_effort_publisher_joins(context, tmp_path):
         best_effort.publish(Float64(data=2.0))
         reliable.publish(Float64(data=3.0))
         assert spin_until(executor, lambda: recorder.writer.message_count == 3)
-    finally:
-        executor.remove_node(recorder)
-        recorder.destroy_node()
-        talker.destroy_node()
-        executor.shutdown()
     got = [m.data for _, _, _, _, m in read_independently(output)]
     assert got == [1.0, 2.0, 3.0]       # the published values, verbatim through CDR: exact
+
+
+def test_unrepresentable_stamps_are_recorded_not_fatal(context, tmp_path):
+    """Issue 12 finding 3: one `sec = -1` stamp killed the recorder (21 of 41 recorded)."""
+    output = tmp_path / 'stamps.mcap'
+    # Negative, or nanoseconds past a second: no valid time (publish_time is a uint64).
+    bad = {20: Time(sec=-1, nanosec=0), 30: Time(sec=2**31 - 1, nanosec=4_000_000_000),
+           35: Time(sec=-2**31, nanosec=999_999_999)}
+    sent = []
+    topic = '/stamps/finger_0/pressure'
+    with recording(context, output, topic, diagnostics_period_s=0.05) as (
+            executor, talker, recorder):
+        pub = talker.create_publisher(FluidPressure, topic, 50)
+        statuses = []
+        talker.create_subscription(DiagnosticArray, '/diagnostics',
+                                   lambda msg: statuses.extend(msg.status), 10)
+        assert spin_until(executor, lambda: pub.get_subscription_count() == 1)
+        for i in range(41):
+            msg = FluidPressure(fluid_pressure=101325.0 + i)
+            msg.header.stamp = bad.get(i, Time(sec=1_700_000_000 + i, nanosec=7))
+            pub.publish(msg)
+            sent.append(msg)
+            executor.spin_once(timeout_sec=0.0)
+        assert spin_until(executor, lambda: recorder.writer.message_count == 41)
+        assert recorder.invalid_stamps == len(bad)
+        # Counted, and reported as a warning on /diagnostics.
+        assert spin_until(executor, lambda: any(
+            s.level == DiagnosticStatus.WARN and 'header stamps' in s.message
+            for s in statuses))
+        values = {v.key: v.value for v in statuses[-1].values}
+        assert values['invalid stamps'] == str(len(bad))
+    got = read_independently(output)
+    assert [m.fluid_pressure for _, _, _, _, m in got] == [m.fluid_pressure for m in sent]
+    for i, ((_, _, log_time, publish_time, decoded), msg) in enumerate(zip(got, sent)):
+        # The payload is the raw CDR, stamp and all; publish_time falls back to log_time.
+        assert (decoded.header.stamp.sec, decoded.header.stamp.nanosec) == \
+            (msg.header.stamp.sec, msg.header.stamp.nanosec)
+        assert publish_time == (log_time if i in bad else time_to_ns(msg.header.stamp))

@@ -116,12 +116,15 @@ def test_kill_9_loses_at_most_the_flush_period(talker, tmp_path):
           f'{FLUSH_PERIOD:g} s: {lost} lost ({lost / RATE:.2f} s of data)')
 
 
+TOPIC = '/sig/finger_2/curvature'
+
+
 @pytest.mark.parametrize('sig', [signal.SIGINT, signal.SIGTERM], ids=['SIGINT', 'SIGTERM'])
 def test_signals_close_with_summary_and_index(talker, tmp_path, sig):
     """SIGINT into one file; SIGTERM into a bag directory split every 0.2 s."""
     split = sig == signal.SIGTERM
     output = tmp_path / ('closed' if split else 'closed.mcap')
-    publisher = talker.create_publisher(Float64, '/sig/finger_2/curvature', 10)
+    publisher = talker.create_publisher(Float64, TOPIC, 10)
     extra = ['-p', 'max_duration_s:=0.2'] if split else []
     process = start_recorder(output, '/sig', '-p', 'compression:=lz4', *extra)
     first = output / 'closed_0.mcap' if split else output
@@ -145,11 +148,15 @@ def test_signals_close_with_summary_and_index(talker, tmp_path, sig):
         assert summary.chunk_indexes and {c.compression for c in summary.chunk_indexes} == \
             {'lz4'}
         assert all(c.message_index_offsets for c in summary.chunk_indexes)
-        got += [m.data for _, _, _, _, m in read_independently(path)]
+        got += [m.data for topic, _, _, _, m in read_independently(path) if topic == TOPIC]
     # Exact: the published values (-1.0 and float(i)) come back verbatim through CDR.
     warm_up = got.count(-1.0)
     assert got[warm_up:] == [float(i) for i in sorted(times)]
     bag = yaml.safe_load(metadata['rosbag2']['serialized_metadata'])
-    assert bag['message_count'] == warm_up + len(times)
+    counts = {t['topic_metadata']['name']: t['message_count']
+              for t in bag['topics_with_message_count']}
+    assert counts[TOPIC] == warm_up + len(times)
+    # The recorder's own diagnostics are recorded too (it records /diagnostics by default).
+    assert set(counts) <= {TOPIC, '/diagnostics'}
     # rosbags reads the file, or the bag directory through the metadata.yaml written on close.
-    assert [m.data for _, _, _, m in read_with_rosbags(output)] == got
+    assert [m.data for topic, _, _, m in read_with_rosbags(output) if topic == TOPIC] == got

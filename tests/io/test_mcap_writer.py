@@ -207,3 +207,19 @@ def test_atomic_writer_names_the_final_file_and_refuses_to_replace(tmp_path):
         writer.add_topic('/aperture', 'std_msgs/msg/Float64')
         writer.write('/aperture', data, 99)
     assert [log for _, _, log, _ in read_with_rosbags(target)] == [99]
+
+
+@pytest.mark.parametrize('field, value', [
+    ('log_time', -1), ('publish_time', -1_000_000_000), ('log_time', 2**64),
+    ('publish_time', float('nan')), ('log_time', 1.5)])
+def test_times_outside_an_mcap_time_are_refused_by_name(tmp_path, field, value):
+    """MCAP times are uint64 ns: mcap's struct.pack raised 'argument out of range' instead."""
+    path = tmp_path / 'times.mcap'
+    with Rosbag2McapWriter(path) as writer:
+        writer.add_topic('/aperture', 'std_msgs/msg/Float64')
+        data = serialize_message(samples(0)['aperture'])
+        times = {'log_time': 5, 'publish_time': 5, field: value}
+        with pytest.raises(ValueError, match=rf'`{field}` must be an integer in \[0, 2\*\*64\)'):
+            writer.write('/aperture', data, times['log_time'], times['publish_time'])
+        writer.write('/aperture', data, 2**64 - 1, 0)    # the extremes are times
+    assert [(log, pub) for _, _, log, pub, _ in read_independently(path)] == [(2**64 - 1, 0)]

@@ -59,7 +59,8 @@ CHANGED = {
     'mcap_recorder': {
         'output_path': '{tmp}/changed.mcap', 'overwrite': True, 'topics': ['/x', 'other'],
         'gripper_config': GRIPPER, 'flush_period_s': 0.5, 'max_file_size_mb': 10.0,
-        'max_duration_s': 60.0, 'compression': 'lz4', 'discovery_period_s': 0.25},
+        'max_duration_s': 60.0, 'compression': 'lz4', 'discovery_period_s': 0.25,
+        'max_queue_mb': 50.0, 'diagnostics_period_s': 0.0},
 }
 
 
