@@ -586,7 +586,7 @@ def _parse(cls, body, *args):
 
 
 def _chunk_records(chunk):
-    """The records of a chunk, its CRC checked; refuses a size that cannot be true."""
+    """Return the records of a chunk, its CRC checked; refuse a size that cannot be true."""
     if chunk.uncompressed_size > _MAX_CHUNK_BYTES:
         raise CorruptFileError(f'a chunk claims {chunk.uncompressed_size} bytes')
     if chunk.compression == 'zstd':
@@ -685,7 +685,7 @@ def _recover_file(path, writer, report):
 
 def _summary(stream):
     """
-    The summary of a file whose footer and summary CRC are intact, or None.
+    Return the summary of a file whose footer and summary CRC are intact, or None.
 
     A damaged summary is worse than none: its chunk offsets would be trusted.
     """
@@ -829,7 +829,7 @@ class _Salvage:
         self.settle(None if counted else False)
 
     def read_record(self, opcode, offset, length=None):
-        """The body of the record of an opcode at an offset (and full length), or None."""
+        """Return the body of the record of an opcode at an offset (and length), or None."""
         size = self.stream.size
         if not len(_MAGIC) <= offset <= size - 9:
             return None

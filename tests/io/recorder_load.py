@@ -102,8 +102,13 @@ def record_under_load(out_dir, *, fingers=3, rate_hz=200.0, seconds=3.0, hog=0,
         Namespace of the topics and the recorder.
     flush_period_s : float
         The recorder's flush period [s].
+    depth : int, optional
+        History depth of the publishers (default: every message, so none can be lost
+        on their side).
     timeout : float
         Longest wait for discovery, acknowledgements and the recorder's exit [s].
+    module : str
+        The recorder, run as ``python -m module`` (to compare versions of it).
 
     Returns
     -------
