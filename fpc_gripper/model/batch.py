@@ -57,7 +57,9 @@ def _tip_forces(tip_forces):
 
 def _in_envelope(designs, pressures, forces):
     """Refuse a grid with a scene outside the envelope, as each single solve would."""
-    worst = forces[int(np.argmax(np.hypot(forces[:, 0], forces[:, 1])))]
+    with np.errstate(over='ignore'):
+        # A force beyond 1e154 N overflows hypot to inf, which still picks it out.
+        worst = forces[int(np.argmax(np.hypot(forces[:, 0], forces[:, 1])))]
     for design in designs:
         check_load(float(pressures.max()), (float(worst[0]), float(worst[1])),
                    design.max_pressure)
