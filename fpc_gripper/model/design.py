@@ -9,7 +9,8 @@ import pathlib
 import numpy as np
 
 from .materials import check_emc_monotonic, default_emc_coefficients, Material
-from .validation import _brief, ArgumentError, check_interval, DESIGN_BOUNDS, real_number
+from .validation import ArgumentError, check_interval, DESIGN_BOUNDS, real_number
+from ..safe_yaml import brief
 
 __all__ = ['ActuatorDesign', 'PAPER_MATERIALS']
 
@@ -104,11 +105,11 @@ class ActuatorDesign:
         coefficients = self.emc_coefficients
         if not isinstance(coefficients, (tuple, list, np.ndarray)) or len(coefficients) != 4:
             raise ArgumentError('emc_coefficients', 'must be 4 numbers (a1, a2, a3, a4) [Pa], '
-                                                    f'got {_brief(coefficients)}')
+                                                    f'got {brief(coefficients)}')
         object.__setattr__(self, 'emc_coefficients', tuple(
             real_number(f'emc_coefficients[{i}]', c, '[Pa]') for i, c in enumerate(coefficients)))
         if not isinstance(self.ribs, (bool, np.bool_)):
-            raise TypeError(f'`ribs` must be a bool, got {_brief(self.ribs)}')
+            raise TypeError(f'`ribs` must be a bool, got {brief(self.ribs)}')
         object.__setattr__(self, 'ribs', bool(self.ribs))
         for name in _MATERIAL_FIELDS:
             value = getattr(self, name)
@@ -116,7 +117,7 @@ class ActuatorDesign:
                 value = Material(**value)
             if not isinstance(value, Material):
                 raise TypeError(f'`{name}` must be a Material or a mapping of E1, E2, nu, '
-                                f'got {_brief(value)}')
+                                f'got {brief(value)}')
             object.__setattr__(self, name, value)
         self._validate()
 

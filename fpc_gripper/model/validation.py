@@ -5,6 +5,8 @@ import math
 
 import numpy as np
 
+from ..safe_yaml import brief
+
 __all__ = ['ArgumentError', 'arc_lengths', 'DESIGN_BOUNDS', 'DesignBounds', 'ENVELOPE',
            'InputLimits', 'UNIQUE_LOAD', 'check_force', 'check_interval', 'check_load',
            'real_number', 'real_pair', 'warm_start_allowed']
@@ -58,7 +60,7 @@ def real_number(name, value, unit):
     """
     if isinstance(value, (bool, np.bool_)) or not isinstance(
             value, (int, float, np.integer, np.floating)):
-        raise TypeError(f'`{name}` must be a real number {unit}, got {_brief(value)}')
+        raise TypeError(f'`{name}` must be a real number {unit}, got {brief(value)}')
     try:
         number = float(value)
     except OverflowError:
@@ -88,7 +90,7 @@ def real_pair(name, value, unit):
     """
     if not (isinstance(value, tuple) and len(value) == 2) and np.shape(value) != (2,):
         raise ValueError(f'`{name}` must be a pair of real numbers {unit}, got '
-                         f'{_brief(value)}')
+                         f'{brief(value)}')
     return (real_number(f'{name}[0]', value[0], unit), real_number(f'{name}[1]', value[1], unit))
 
 
@@ -124,7 +126,7 @@ def arc_lengths(name, value, length):
     """
     array = np.asarray(value)
     if array.dtype == object or array.dtype.kind not in 'iuf':
-        raise TypeError(f'`{name}` must be real numbers [m], got {_brief(value)}')
+        raise TypeError(f'`{name}` must be real numbers [m], got {brief(value)}')
     values = array.astype(float).ravel()
     slack = _ARC_SLACK * length
     bad = ~(np.isfinite(values) & (values >= -slack) & (values <= length + slack))
@@ -132,12 +134,6 @@ def arc_lengths(name, value, length):
         raise ValueError(f'`{name}` must lie in [0, {length:g}] [m] (the free length), got '
                          f'{values[bad][0]!r}')
     return np.clip(values, 0.0, length), array.shape
-
-
-def _brief(value):
-    """Return a repr short and quick enough for a message, whatever `value` is."""
-    import reprlib
-    return reprlib.repr(value)
 
 
 # -- the model's validity envelope -----------------------------------------------------------
