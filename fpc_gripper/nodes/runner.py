@@ -131,7 +131,8 @@ def run_node(build, name, args=None, check=None):
 
     """
     stop = StopRequest()
-    previous = {signum: signal.signal(signum, stop) for signum in _STOP_SIGNALS}
+    for signum in _STOP_SIGNALS:
+        signal.signal(signum, stop)
     node = executor = waker = None
     try:
         try:
@@ -167,6 +168,10 @@ def run_node(build, name, args=None, check=None):
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
-        for signum, handler in previous.items():
-            signal.signal(signum, handler)
+        # The process ends now. A repeat of the stop signal that comes during the
+        # interpreter's exit (Ctrl-C reaches a node under ros2 launch twice, 30 ms apart)
+        # would raise KeyboardInterrupt there, with the default handler back, and turn the
+        # clean exit into -2: from here on the stop signals are ignored.
+        for signum in _STOP_SIGNALS:
+            signal.signal(signum, signal.SIG_IGN)
     return 0
