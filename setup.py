@@ -1,16 +1,44 @@
 """Setup script for the fpc_gripper ament_python package."""
 
 from glob import glob
+import os
+import subprocess
+import sys
 
 from setuptools import find_packages, setup
+from setuptools.command.build_py import build_py
 
 package_name = 'fpc_gripper'
+
+
+class BuildWithEngine(build_py):
+    """build_py, then the compiled engine into the built package (pip install, colcon build)."""
+
+    def run(self):
+        super().run()
+        if self.dry_run or getattr(self, 'editable_mode', False) \
+                or os.environ.get('FPC_SKIP_ENGINE_BUILD'):
+            # An editable install builds in place: scripts/setup.sh runs the build itself.
+            return
+        try:
+            import numba  # noqa: F401
+        except ImportError:
+            print('fpc_gripper: numba is not importable here, so the engine is not built: '
+                  'run `python -m fpc_gripper.model.build` after the install (or install '
+                  'with --no-build-isolation)', file=sys.stderr)
+            return
+        # In the built copy, so that its sources are the ones stamped; a build copied in
+        # with the package data (a source tree already set up) is kept when current.
+        subprocess.run([sys.executable, '-m', 'fpc_gripper.model.build', '--if-stale'],
+                       cwd=self.build_lib, check=True)
+
 
 setup(
     name=package_name,
     version='0.1.0',
     packages=find_packages(exclude=['tests', 'tests.*', 'bench']),
-    package_data={'fpc_gripper': ['data/*.json']},
+    package_data={'fpc_gripper': ['data/*.json', 'model/compiled/*']},
+    cmdclass={'build_py': BuildWithEngine},
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),

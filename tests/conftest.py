@@ -7,6 +7,9 @@ import sys
 import pytest
 
 _ROOT = pathlib.Path(__file__).resolve().parents[1]
+# Nothing compiles in a test: the engine is built at set-up, and a signature missing from
+# the build is an error here, in this process and in every node the tests start.
+os.environ['FPC_ENGINE_STRICT'] = '1'
 
 _WORKER = os.environ.get('PYTEST_XDIST_WORKER', '')
 if _WORKER.startswith('gw') and os.environ.get('FPC_NETNS') == '1':

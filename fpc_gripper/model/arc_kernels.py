@@ -3,16 +3,16 @@
 import collections
 import math
 
-import numba
 import numpy as np
 
+from .compiled import jit
 from .pcc_kernels import _section_energy, _section_slopes
 
 __all__ = ['ArcData', 'arc_integrals', 'arc_derivatives', 'arc_energy', 'arc_step',
            'arc_solve_linear', 'arc_node_jacobian']
 
-# Compiled once per argument types and kept on disk; nogil lets a caller thread the solves.
-_jit = numba.njit(cache=True, nogil=True)
+# Built at install (`compiled`), once per argument types; nogil lets a caller thread them.
+_jit = jit
 #: Mirrored eigenvalues of the 3 x 3 Hessian are floored at this times max |lambda|.
 _FLOOR = 1e-10
 

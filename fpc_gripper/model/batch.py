@@ -7,6 +7,7 @@ import numpy as np
 
 from . import engine, shape_kernels
 from .analysis import flexural_rigidity
+from .compiled import over_cores
 from .design import ActuatorDesign
 from .pcc import PCCSolver
 from .pipeline import finger_model, model_label, ModelSettings, rung_label, solver_label
@@ -201,15 +202,20 @@ class GridResult:
         if isinstance(solver, CCMSolver) and all(
                 s.samples_per_segment == solver.samples_per_segment for s in solvers):
             lengths = np.array([s.segments.lengths for s in solvers])
-            return shape_kernels.ccm_circles(batch.states[rows], lengths, slots[rows],
-                                             solver.samples_per_segment)
+            states, slots = batch.states[rows], slots[rows]
+            return over_cores(lambda lo, hi: shape_kernels.ccm_circles(
+                states[lo:hi], lengths, slots[lo:hi], solver.samples_per_segment), rows.size)
         if isinstance(solver, PCCSolver):
             _, p, f = np.unravel_index(scenes, self.shape)
             datas = numba.typed.List([s.kernel_data(False) for s in solvers])
-            return shape_kernels.pcc_circles(
-                batch.states[rows], datas, np.array([s._sample_segment for s in solvers]),
-                np.array([s._sample_offset for s in solvers]), slots[rows],
-                self.pressures[p], np.ascontiguousarray(self.tip_forces[f]))
+            segment = np.array([s._sample_segment for s in solvers])
+            offset = np.array([s._sample_offset for s in solvers])
+            states, slots = batch.states[rows], slots[rows]
+            pressures = self.pressures[p]
+            forces = np.ascontiguousarray(self.tip_forces[f])
+            return over_cores(lambda lo, hi: shape_kernels.pcc_circles(
+                states[lo:hi], datas, segment, offset, slots[lo:hi], pressures[lo:hi],
+                forces[lo:hi]), rows.size)
         # Another discretisation: each scene's own result.
         out = np.empty((scenes.size, 2))
         for k, scene in enumerate(scenes):

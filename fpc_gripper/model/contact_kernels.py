@@ -2,9 +2,10 @@
 
 import math
 
-import numba
 from numba.extending import register_jitable
 import numpy as np
+
+from .compiled import jit
 
 __all__ = ['HALF_PLANE', 'CIRCLE', 'POLYGON', 'ELLIPSE', 'KIND_NAMES', 'signed_distance',
            'closest_point', 'FREE', 'NORMAL', 'STICK', 'SLIP_POS', 'SLIP_NEG', 'STATUS_NAMES',
@@ -188,7 +189,7 @@ def closest_point(kind, params, px, pz):
     return px - g * gx / size2, pz - g * gz / size2
 
 
-@numba.njit(cache=True, nogil=True)
+@jit
 def pair_geometry(kind, params, positions, pair_point, pair_object):
     """
     `signed_distance` of every (point, obstacle) pair and the nearest boundary point.
@@ -220,7 +221,7 @@ def pair_geometry(kind, params, positions, pair_point, pair_object):
     return out
 
 
-@numba.njit(cache=True, nogil=True)
+@jit
 def pair_forces(kind, params, positions, pair_point, pair_object, status, lam, mu):
     """
     Gap, unit normal and contact force of every (point, obstacle) pair.

@@ -4,7 +4,6 @@ import collections
 from dataclasses import dataclass
 import enum
 import math
-import pathlib
 import typing
 
 import numba
@@ -14,6 +13,7 @@ import numpy as np
 
 from . import contact_kernels as ck
 from . import kernels
+from .compiled import jit, over_cores
 
 __all__ = ['SolverStatus', 'NewtonOptions', 'NewtonOutcome', 'newton', 'solve', 'rigidity',
            'linear_step', 'linear_solve', 'BorderedOutcome', 'solve_batch', 'rigidity_batch',
@@ -1265,63 +1265,31 @@ def _rigidity(problem, x, pressure, node, direction, displacement, options, cap)
     return x, force, True, iterations, 1.0, min_eig > 0.0, np.abs(grad).max() / options[6]
 
 
-def _sources_stamp():
-    """(name, mtime, size) of every source of the model package."""
-    here = pathlib.Path(__file__).resolve().parent
-    return tuple((path.name, path.stat().st_mtime_ns, path.stat().st_size)
-                 for path in sorted(here.glob('*.py')))
-
-
-def _cached(dispatcher):
-    """
-    Make a compiled entry's disk cache stale when any model source changes, not its own only.
-
-    numba checks the stamp of the file that defines a cached function, but the entries
-    below compile in the kernels of other modules (the discretisations'): without this an
-    edited kernel would keep running its old compiled code. The stamp is numba's own
-    (`IndexDataCacheFile._source_stamp`, numba 0.68), extended with every model source's.
-    """
-    cache_file = getattr(getattr(dispatcher, '_cache', None), '_cache_file', None)
-    if cache_file is not None and hasattr(cache_file, '_source_stamp'):
-        cache_file._source_stamp = (cache_file._source_stamp, _sources_stamp())
-    return dispatcher
-
-
-# Compiled once per discretisation type and kept on disk; nogil lets callers thread them.
-def _jit(function):
-    return _cached(numba.njit(cache=True, nogil=True)(function))
-
-
-def _jit_parallel(function):
-    return _cached(numba.njit(cache=True, nogil=True, parallel=True)(function))
-
-
-@_jit
+@jit
 def _newton_entry(problem, x, pressure, nodes, forces, options, cap):
     return _newton(problem, x, pressure, nodes, forces, options, cap)
 
 
-@_jit
+@jit
 def _solve_entry(problem, initial, warm, flat, pressure, nodes, forces, options, cap):
     return _solve(problem, initial, warm, flat, pressure, nodes, forces, options, cap)
 
 
-@_jit
+@jit
 def _rigidity_entry(problem, x, pressure, node, direction, displacement, options, cap):
     return _rigidity(problem, x, pressure, node, direction, displacement, options, cap)
 
 
 # numpy's error model (a division by zero gives inf or nan, which the loops test for) keeps
 # the many divisions of the contact code free of exception paths: it compiles in less time.
-@_cached
-@numba.njit(cache=True, nogil=True, error_model='numpy')
+@jit(error_model='numpy')
 def _contact_entry(problem, x, lam, status, depth, pressure, nodes, forces, con, options, cap,
                    grow):
     return _contact(problem, x, lam, status, depth, pressure, nodes, forces, con, options, cap,
                     grow)
 
 
-@_jit_parallel
+@jit
 def _solve_batch_entry(problems, design, pressures, nodes, forces, initial, flat, options, cap,
                        tip):
     count = pressures.size
@@ -1330,7 +1298,7 @@ def _solve_batch_entry(problems, design, pressures, nodes, forces, initial, flat
     status = np.empty(count, dtype=np.int64)
     iterations = np.empty(count, dtype=np.int64)
     figures = np.empty((count, 6))
-    for i in numba.prange(count):
+    for i in range(count):
         problem = problems[design[i]]
         start = initial[i] if warm else flat
         x, code, its, grad, step, eig, fraction = _solve(
@@ -1348,7 +1316,7 @@ def _solve_batch_entry(problems, design, pressures, nodes, forces, initial, flat
     return states, status, iterations, figures
 
 
-@_jit_parallel
+@jit
 def _rigidity_batch_entry(unloaded, loaded, design, pressures, node, direction, displacement,
                           flat, options, cap):
     count = pressures.size
@@ -1359,7 +1327,7 @@ def _rigidity_batch_entry(unloaded, loaded, design, pressures, node, direction, 
     figures = np.empty((count, 10))
     nodes = np.zeros(0, dtype=np.int64)
     forces = np.zeros((0, 2))
-    for i in numba.prange(count):
+    for i in range(count):
         d = design[i]
         x, code, its, grad, step, eig, fraction = _solve(
             unloaded[d], flat, False, flat, pressures[i], nodes, forces, options, cap)
@@ -2076,7 +2044,7 @@ def _index(design, pressures, count):
 
 def solve_batch(problems, design, pressures, nodes, forces, options, tip, initial=None):
     """
-    Solves of S independent scenes in one compiled loop over both cores (`prange`).
+    Solves of S independent scenes in compiled loops over both cores (`over_cores`).
 
     Scene i is `solve(problems[design[i]], pressures[i], loads_i, options, initial[i])`,
     loads_i being `forces[i]` at `nodes`: the same arithmetic, so the same answer.
@@ -2115,8 +2083,13 @@ def solve_batch(problems, design, pressures, nodes, forces, options, tip, initia
         if initial.shape != (pressures.size,) + flat.shape:
             raise ValueError(f'`initial` must have shape {(pressures.size,) + flat.shape}, '
                              f'got {initial.shape}')
-    states, status, iterations, figures = _solve_batch_entry(
-        datas, design, pressures, nodes, forces, initial, flat, opts, cap, int(tip))
+    warm = initial.shape[0] > 0
+
+    def run(lo, hi):
+        return _solve_batch_entry(datas, design[lo:hi], pressures[lo:hi], nodes, forces[lo:hi],
+                                  initial[lo:hi] if warm else initial, flat, opts, cap,
+                                  int(tip))
+    states, status, iterations, figures = over_cores(run, pressures.size)
     return BatchOutcome(states, status, iterations, *figures[:, :4].T, figures[:, 4:])
 
 
@@ -2147,9 +2120,12 @@ def rigidity_batch(problems, design, pressures, node, direction, displacement, o
     design, pressures = _index(design, pressures, len(problems))
     free, flat, opts, cap = _batch_inputs(problems, False, options)
     loaded = _batch_inputs(problems, True, options)[0]
-    out = _rigidity_batch_entry(free, loaded, design, pressures, int(node),
-                                np.ascontiguousarray(direction, dtype=float),
-                                float(displacement), flat, opts, cap)
+    direction = np.ascontiguousarray(direction, dtype=float)
+
+    def run(lo, hi):
+        return _rigidity_batch_entry(free, loaded, design[lo:hi], pressures[lo:hi], int(node),
+                                     direction, float(displacement), flat, opts, cap)
+    out = over_cores(run, pressures.size)
     unloaded_x, status, states, iterations, figures = out
     unloaded = BatchOutcome(unloaded_x, status, iterations[:, 0], *figures[:, :4].T,
                             np.full((pressures.size, 2), np.nan))

@@ -4,8 +4,9 @@ import collections
 import functools
 import math
 
-import numba
 import numpy as np
+
+from .compiled import jit
 
 __all__ = ['segment_energy', 'segment_derivatives', 'load_energy', 'load_derivatives',
            'node_jacobian', 'load_arrays', 'consistent_strain_map', 'node_positions',
@@ -15,8 +16,8 @@ __all__ = ['segment_energy', 'segment_derivatives', 'load_energy', 'load_derivat
            'node_positions_kernel', 'end_rotation_kernel', 'newton_step_blocks',
            'newton_step_dense']
 
-# Compiled once per argument types and kept on disk; nogil lets a caller thread the solves.
-_jit = numba.njit(cache=True, nogil=True)
+# Built at install (`compiled`), once per argument types; nogil lets a caller thread them.
+_jit = jit
 #: Eigenvalues of an indefinite Hessian are mirrored and floored at this times max |lambda|.
 EIGEN_FLOOR = 1e-8
 # Columns of the PEMC products (1, phi_a, phi_a phi_b) take F, sigma and sigma' in turn

@@ -3,8 +3,9 @@
 import collections
 import math
 
-import numba
 import numpy as np
+
+from .compiled import jit
 
 __all__ = ['section_arrays', 'half_angle_sinc_kernel', 'energy_kernel', 'derivatives_kernel',
            'banded_cholesky', 'cholesky_solve', 'newton_step_kernel', 'nodes_kernel',
@@ -13,8 +14,8 @@ __all__ = ['section_arrays', 'half_angle_sinc_kernel', 'energy_kernel', 'derivat
            'pcc_node_jacobian', 'point_positions_kernel', 'point_jacobian_kernel',
            'point_derivatives_kernel']
 
-# Compiled once per argument types and kept on disk; nogil lets a caller thread the solves.
-_jit = numba.njit(cache=True, nogil=True)
+# Built at install (`compiled`), once per argument types; nogil lets a caller thread them.
+_jit = jit
 
 #: Half-bandwidth of the PCC Hessian in the engine's ordering (eps_i, c1_i, theta_i).
 BANDWIDTH = 3

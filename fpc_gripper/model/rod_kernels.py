@@ -2,9 +2,9 @@
 
 import math
 
-import numba
 import numpy as np
 
+from .compiled import jit
 from .pcc_kernels import _section_energy, _section_slopes, banded_cholesky, cholesky_solve
 
 __all__ = ['energy_kernel', 'derivatives_kernel', 'newton_step_kernel', 'condense_kernel',
@@ -12,8 +12,8 @@ __all__ = ['energy_kernel', 'derivatives_kernel', 'newton_step_kernel', 'condens
            'node_jacobian_kernel', 'local_energy_kernel', 'local_derivatives_kernel',
            'local_step_kernel', 'sample_fields_kernel', 'sample_points_kernel']
 
-# Compiled once per argument types and kept on disk; nogil lets a caller thread the solves.
-_jit = numba.njit(cache=True, nogil=True)
+# Built at install (`compiled`), once per argument types; nogil lets a caller thread them.
+_jit = jit
 
 # Array convention of every kernel (E elements, Q Gauss points each, degree p):
 #   basis (Q, p + 1)        N_a at the Gauss points of the reference element [-]

@@ -2,17 +2,16 @@
 
 import math
 
-import numba
 import numpy as np
 
 from . import arc_kernels, kernels, pcc_kernels
-from .engine import _cached
+from .compiled import jit
 
 __all__ = ['signed_distances', 'distance_jacobian', 'circle_fit', 'ccm_samples',
            'ccm_circles', 'pcc_circles']
 
-# Compiled once per argument types and kept on disk; nogil lets a caller thread the fits.
-_jit = numba.njit(cache=True, nogil=True)
+# Built at install (`compiled`), once per argument types; nogil lets a caller thread them.
+_jit = jit
 #: Pratt's normalisation B^2 + C^2 - 4 A D = 1 as a quadratic form in (A, B, C, D).
 _PRATT = np.array([[0.0, 0.0, 0.0, -2.0],
                    [0.0, 1.0, 0.0, 0.0],
@@ -358,12 +357,7 @@ def ccm_samples(q, lengths, per_segment):
 
 
 # -- batches: the fit of many scenes' samples, over both cores --------------------------------
-def _jit_parallel(function):
-    # The entries compile in other modules' kernels: stale them with any model source.
-    return _cached(numba.njit(cache=True, nogil=True, parallel=True)(function))
-
-
-@_jit_parallel
+@jit
 def ccm_circles(states, lengths, slots, per_segment):
     """
     Circle fit of S CCM states: (S, 2) of (curvature [1/m], rmsd [m]).
@@ -382,7 +376,7 @@ def ccm_circles(states, lengths, slots, per_segment):
     """
     count = states.shape[0]
     out = np.empty((count, 2))
-    for i in numba.prange(count):
+    for i in range(count):
         points, _ = ccm_samples(states[i], lengths[slots[i]], per_segment)
         curvature, rmsd, _, _ = circle_fit(points)
         out[i, 0] = curvature
@@ -390,7 +384,7 @@ def ccm_circles(states, lengths, slots, per_segment):
     return out
 
 
-@_jit_parallel
+@jit
 def pcc_circles(states, datas, sample_segment, sample_offset, slots, pressures, forces):
     """
     Circle fit of S PCC states through the result's own samples (`outputs_kernel`).
@@ -418,7 +412,7 @@ def pcc_circles(states, datas, sample_segment, sample_offset, slots, pressures, 
     """
     count = states.shape[0]
     out = np.empty((count, 2))
-    for i in numba.prange(count):
+    for i in range(count):
         data = datas[slots[i]]
         n = data.lengths.size
         state = np.empty((n, 3))

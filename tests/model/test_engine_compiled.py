@@ -8,7 +8,7 @@ import numba
 import numpy as np
 import pytest
 
-from fpc_gripper.model import ActuatorDesign, CCMSolver, engine, kernels, pcc_kernels
+from fpc_gripper.model import ActuatorDesign, CCMSolver, compiled, engine, kernels, pcc_kernels
 from fpc_gripper.model.engine import SolverStatus
 from fpc_gripper.model.pcc import PCCSolver
 
@@ -337,30 +337,40 @@ ENTRIES = ('_newton_entry', '_solve_entry', '_rigidity_entry', '_solve_batch_ent
 
 @pytest.mark.parametrize('entry', ENTRIES)
 def test_cache_stamp_covers_every_model_source(entry):
-    # engine._cached extends numba's (0.68) private stamp; a numba upgrade that renames
-    # it would silently leave edited kernels running their stale compiled code.
+    # Each entry inlines kernels of other modules: its stamp is the whole model's content.
     cache_file = getattr(engine, entry)._cache._cache_file
-    own, sources = cache_file._source_stamp
-    files = sorted(MODEL.glob('*.py'))
-    assert [name for name, _, _ in sources] == [path.name for path in files]
-    for (name, mtime, size), path in zip(sources, files):
-        assert (mtime, size) == (path.stat().st_mtime_ns, path.stat().st_size), name
-    assert own                                  # numba's own stamp of engine.py is kept
+    assert cache_file._source_stamp == compiled.sources_stamp(MODEL)
+    assert isinstance(getattr(engine, entry)._cache, compiled._Cache)
+
+
+def test_the_stamp_follows_content_not_mtimes(tmp_path):
+    # A copy into an install (new mtimes) keeps the stamp; an edit of any kernel source,
+    # even one byte of a comment, changes it.
+    copy_dir = tmp_path / 'model'
+    copy_dir.mkdir()
+    for path in MODEL.rglob('*.py'):
+        target = copy_dir / path.relative_to(MODEL)
+        target.parent.mkdir(parents=True, exist_ok=True)
+        target.write_bytes(path.read_bytes())
+    assert compiled.sources_stamp(copy_dir) == compiled.sources_stamp(MODEL)
+    # The build's driver chooses what is compiled, not how: it is not stamped.
+    driver = copy_dir / 'build.py'
+    driver.write_bytes(driver.read_bytes() + b'# edited\n')
+    assert compiled.sources_stamp(copy_dir) == compiled.sources_stamp(MODEL)
+    kernel = copy_dir / 'pcc_kernels.py'
+    kernel.write_bytes(kernel.read_bytes() + b'# edited\n')
+    assert compiled.sources_stamp(copy_dir) != compiled.sources_stamp(MODEL)
 
 
 def test_cache_index_goes_stale_when_a_kernel_source_changes():
-    # numba compares the stamp stored in the index with the dispatcher's: the entries
-    # written under the extended stamp load, and a kernel module's new mtime misses.
+    # numba compares the stamp stored in the index with the dispatcher's: the build's
+    # entries load, and an index read under another stamp (an edited source) is empty.
     solver = CCMSolver(ActuatorDesign.paper(0.25), 8)
     engine.solve(solver, 10e3, [], solver._options)
     cache_file = engine._solve_entry._cache._cache_file
-    assert cache_file._load_index()                       # fresh: entries found
-    own, sources = cache_file._source_stamp
-    edited = tuple((name, mtime + (name == 'kernels.py'), size)
-                   for name, mtime, size in sources)
-    assert edited != sources
+    assert cache_file._load_index()                       # built: entries found
     stale = copy.copy(cache_file)
-    stale._source_stamp = (own, edited)
+    stale._source_stamp = compiled.sources_stamp(MODEL) + '-edited'
     assert stale._load_index() == {}
 
 

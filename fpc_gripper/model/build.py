@@ -1,0 +1,363 @@
+"""
+Build the compiled engine at install: ``python -m fpc_gripper.model.build``.
+
+scripts/setup.sh, ``pip install`` and ``colcon build`` (through setup.py) run this once;
+nodes, tools and tests then load the code read-only (`compiled`). The parts
+(`build_parts`) run the front ends on small scenes, which compiles every entry for the
+argument types it meets in use; two processes share them, each writing a directory of
+its own, and the directories are merged into the build, which is replaced whole only
+when every part succeeded. A last pass runs every part again in a fresh process and
+fails if anything had to compile there.
+"""
+
+import argparse
+import contextlib
+import os
+import pathlib
+import selectors
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+
+__all__ = ['PARTS', 'build', 'main']
+
+_PACKAGE_ROOT = pathlib.Path(__file__).resolve().parents[2]
+
+
+# -- the parts: each runs one front end on a small scene -----------------------------------
+def _design(prestrain=0.25):
+    from fpc_gripper.model import ActuatorDesign
+    return ActuatorDesign.paper(prestrain=prestrain)
+
+
+def _outputs(result):
+    """Read every derived output of a result (the shape kernels compile on first use)."""
+    for name in ('points', 'tip', 'curvature', 'fit_rmsd', 'valid', 'beta', 'message'):
+        getattr(result, name, None)
+    position_at = getattr(result, 'position_at', None)
+    if position_at is not None:
+        position_at(0.045)
+
+
+def _engine_calls(solver, force):
+    """Run the engine's Newton and sensitivity, and the discretisation's hooks, from Python."""
+    from fpc_gripper.model import engine, kernels
+    tip_loads = getattr(solver, 'tip_loads', None)
+    loads = tip_loads(force) if tip_loads else solver._loads(force, ())
+    for load in ([], loads):
+        out = engine.solve(solver, 5.0e4, load, solver._options)
+        engine.newton(solver, out.x, 5.0e4, load, solver._options)
+        if hasattr(solver, 'parameter_gradient'):
+            engine.sensitivity(solver, out.x, 5.0e4, load)
+        # The interface the engine's loops take, called from Python (the interpreted loop
+        # and the hooks' own tests do): the methods, then the compiled hooks themselves.
+        x = out.x + 0.01
+        _, grad, hess = solver.derivatives(x, 5.0e4, load)
+        solver.energy(x, 5.0e4, load)
+        solver.step(grad, hess)
+        solver.node_jacobian(x, loads[0][0])
+        if hasattr(solver, 'solve_linear'):
+            solver.solve_linear(hess, grad)
+        data = solver.kernel_data(bool(load))
+        hooks = type(data)._kernels
+        nodes, forces = kernels.load_arrays(load)
+        _, grad, hess = hooks['derivatives'](data, x, 5.0e4, nodes, forces)
+        hooks['energy'](data, x, 5.0e4, nodes, forces)
+        hooks['step'](data, grad, hess)
+        hooks['solve_linear'](data, hess, grad)
+        hooks['node_jacobian'](data, x, loads[0][0])
+
+
+def _circle_fit():
+    """Run the circle fit's pieces on a sampled arc, as its own tests call them."""
+    import numpy as np
+    from fpc_gripper.model import analysis
+    angle = np.linspace(0.0, 1.0, 17)
+    x, z = np.sin(angle) / 20.0, (np.cos(angle) - 1.0) / 20.0
+    params = np.array([10.0, 0.0, 0.1])
+    analysis._signed_distances(params, x, z, x * x + z * z)
+    analysis._distance_jacobian(params, x, z, x * x + z * z)
+    analysis.fit_circle(np.column_stack([x, z]))
+
+
+def _ccm():
+    from fpc_gripper.model import CCMSolver
+    for solver in (CCMSolver(_design(), n_segments=8),
+                   CCMSolver(_design(), n_segments=8, reconstruction='consistent')):
+        free = solver.solve(pressure=1.0e5)
+        _outputs(free)
+        _outputs(solver.solve(pressure=1.01e5, initial=free))
+        _outputs(solver.solve(pressure=1.0e5, tip_force=(0.05, -0.05)))
+        solver.rigidity(pressure=5.0e4, axis='x')
+        solver.rigidity(pressure=5.0e4, axis='z')
+        _engine_calls(solver, (0.05, -0.05))
+    loaded = CCMSolver(_design(), n_segments=8, load_points=(0.045,))
+    _outputs(loaded.solve(pressure=5.0e4, point_loads=[(0.045, 0.0, -0.05)]))
+    _circle_fit()
+
+
+def _pcc():
+    from fpc_gripper.model import PCCSolver
+    solver = PCCSolver(_design(), n_segments=22)
+    free = solver.solve(pressure=1.0e5)
+    _outputs(free)
+    _outputs(solver.solve(pressure=1.01e5, initial=free))
+    _outputs(solver.solve(pressure=1.0e5, tip_force=(0.05, -0.05)))
+    solver.rigidity(pressure=5.0e4, axis='x')
+    solver.rigidity(pressure=5.0e4, axis='z')
+    _engine_calls(solver, (0.05, -0.05))
+
+
+def _adaptive():
+    from fpc_gripper.model.pipeline import finger_model
+    solver = finger_model(_design())
+    for pressure in (0.0, 1.0e5, 3.0e5):
+        _outputs(solver.solve(pressure=pressure))
+        _outputs(solver.solve(pressure=pressure, tip_force=(0.1, -0.2)))
+    solver.rigidity(pressure=5.0e4, axis='x')
+    solver.rigidity(pressure=5.0e4, axis='z')
+
+
+def _ladder():
+    import numpy as np
+    from fpc_gripper.model import ArcSolver, RodSolver
+    from fpc_gripper.model import engine, ladder, rod_kernels
+    for solver in (ArcSolver(_design()), RodSolver(_design())):
+        _outputs(solver.solve(pressure=1.0e5))
+        _outputs(solver.solve(pressure=1.0e5, tip_force=(0.05, -0.05)))
+        solver.rigidity(pressure=5.0e4, axis='x')
+        solver.rigidity(pressure=5.0e4, axis='z')
+    # The rod's pointwise (eps, c1) problem of its outputs, energy included (the line
+    # search of its Newton calls it only when a full step fails).
+    state = engine.solve(solver, 1.0e5, [], solver._options).x
+    _, kap, along, start = rod_kernels.sample_fields_kernel(
+        state, solver._xq.size, *solver._sample_at[1:5], np.zeros(2))
+    local = ladder._PointwiseLocal(solver, kap, along, solver._sample_at[4], 1.0e5)
+    local.energy(start, 1.0e5, [])
+    local.derivatives(start, 1.0e5, [])
+
+
+def _contact():
+    from fpc_gripper.model.contact import Circle, contact_path, point_gaps, solve_contact
+    from fpc_gripper.model.pipeline import contact_model
+    solver = contact_model(_design())
+    disk = Circle(center=(0.04, -0.06), radius=0.02)
+    result = solve_contact(solver, 1.0e5, [disk])
+    _outputs(result)
+    point_gaps(solver, solver.flat(), [disk])
+    contact_path(solver, [0.5e5, 1.0e5], [disk], mu=0.5)
+
+
+def _grids():
+    from fpc_gripper.model import batch
+    from fpc_gripper.model.pipeline import ModelSettings
+    designs = [_design(), _design(0.15)]
+    pressures = [0.0, 1.0e5, 2.0e5]
+    for settings in (ModelSettings(), ModelSettings(tolerance=0.0)):
+        for forces in (((0.0, 0.0),), ((0.0, 0.0), (0.05, -0.05))):
+            grid = batch.solve_grid(designs, pressures, tip_forces=forces, settings=settings)
+            grid.curvature
+            grid.fit_rmsd
+        for axis in ('x', 'z'):
+            batch.rigidity_grid(designs, pressures, axis=axis, settings=settings)
+
+
+#: name -> (callable, seconds it compiles for on one core, measured): the cost deals them.
+PARTS = {
+    'ccm': (_ccm, 118), 'contact': (_contact, 102), 'grids': (_grids, 80), 'pcc': (_pcc, 35),
+    'ladder': (_ladder, 32), 'adaptive': (_adaptive, 8),
+}
+
+
+def _run_parts(names, out=sys.stdout):
+    for name in names:
+        start = time.perf_counter()
+        PARTS[name][0]()
+        print(f'done {name} {time.perf_counter() - start:.1f}', file=out, flush=True)
+
+
+# -- the driver --------------------------------------------------------------------------------
+def _spawn(args, env_extra, cwd):
+    from fpc_gripper.model import compiled
+    env = {k: v for k, v in os.environ.items() if k not in (compiled.BUILD_ENV,
+                                                            'NUMBA_DISABLE_JIT')}
+    env.update(env_extra)
+    return subprocess.Popen([sys.executable, '-m', 'fpc_gripper.model.build', *args],
+                            cwd=cwd, env=env, stdout=subprocess.PIPE, text=True)
+
+
+def _split(names, jobs):
+    """Deal the parts to `jobs` workers, the costliest first to the least loaded."""
+    groups = [[] for _ in range(jobs)]
+    loads = [0.0] * jobs
+    for name in sorted(names, key=lambda n: -PARTS[n][1]):
+        k = loads.index(min(loads))
+        groups[k].append(name)
+        loads[k] += PARTS[name][1]
+    return [group for group in groups if group]
+
+
+def _merge(workers, into):
+    """Merge the workers' indexes and data into `into` (same function: same file names)."""
+    from numba.core.caching import IndexDataCacheFile
+    from fpc_gripper.model import compiled
+    stamp = compiled.sources_stamp()
+    count = 0
+    for directory in workers:
+        for index in sorted(pathlib.Path(directory).glob('*.nbi')):
+            base = index.name[:-len('.nbi')]
+            source = IndexDataCacheFile(str(directory), base, stamp)
+            target = IndexDataCacheFile(str(into), base, stamp)
+            for key, name in source._load_index().items():
+                target.save(key, source._load_data(name))
+                count += 1
+    return count
+
+
+def build(jobs=2, log=sys.stderr):
+    """
+    Build the engine into `compiled.BUILD_DIR`, replacing any earlier build only on success.
+
+    Returns the wall time [s]; raises RuntimeError when a part fails or compiles again.
+    """
+    from fpc_gripper.model import compiled
+    start = time.perf_counter()
+    final = compiled.BUILD_DIR
+    names = list(PARTS)
+    groups = _split(names, max(1, int(jobs)))
+    print(f'fpc_gripper: building the compiled engine into {final} ({len(names)} parts, '
+          f'{len(groups)} processes; about 4 min on 2 cores)', file=log, flush=True)
+    final.parent.mkdir(parents=True, exist_ok=True)
+    for stale in final.parent.glob('.build-*'):
+        shutil.rmtree(stale, ignore_errors=True)      # an interrupted build's
+    with tempfile.TemporaryDirectory(prefix='.build-', dir=final.parent) as work:
+        work = pathlib.Path(work)
+        dirs = [work / f'worker{k}' for k in range(len(groups))]
+        procs = [_spawn(['--parts', ','.join(group)], {compiled.BUILD_ENV: str(d)},
+                        _PACKAGE_ROOT) for group, d in zip(groups, dirs)]
+        done = 0
+        with contextlib.ExitStack() as stack:
+            for proc in procs:
+                stack.callback(proc.wait)
+            for line in _interleave(procs):
+                if line.startswith('done '):
+                    done += 1
+                    _, name, seconds = line.split()
+                    print(f'  [{done}/{len(names)}] {name:<10} {float(seconds):6.1f} s '
+                          f'({time.perf_counter() - start:.0f} s in all)', file=log,
+                          flush=True)
+        failed = [proc.returncode for proc in procs if proc.returncode]
+        if failed or done != len(names):
+            raise RuntimeError(f'engine build failed (worker exit codes {failed}): the '
+                               f'earlier build, if any, is left as it was')
+        staging = work / 'compiled'
+        staging.mkdir()
+        count = _merge(dirs, staging)
+        compiled.write_manifest(staging, built=time.strftime('%Y-%m-%d %H:%M:%S'),
+                                signatures=count, parts=names)
+        restore = _swap(staging, final)
+        check = _spawn(['--verify'], {}, _PACKAGE_ROOT)
+        out, _ = check.communicate()
+        if check.returncode:
+            shutil.rmtree(final, ignore_errors=True)
+            restore()
+            raise RuntimeError(f'engine build incomplete: {out.strip()}')
+    wall = time.perf_counter() - start
+    print(f'fpc_gripper: engine built, {count} compiled signatures, {wall:.0f} s; '
+          f'{out.strip()}', file=log, flush=True)
+    return wall
+
+
+def _swap(staging, final):
+    """Put `staging` in place of `final`; return a callable that restores the old build."""
+    old = final.with_name(final.name + '.old')
+    shutil.rmtree(old, ignore_errors=True)
+    if final.exists():
+        final.rename(old)
+    staging.rename(final)
+
+    def restore():
+        if old.exists():
+            old.rename(final)
+    return restore
+
+
+def _interleave(procs):
+    """Yield the lines of several processes' stdout as they come."""
+    selector = selectors.DefaultSelector()
+    for proc in procs:
+        selector.register(proc.stdout, selectors.EVENT_READ)
+    open_count = len(procs)
+    while open_count:
+        for key, _ in selector.select():
+            line = key.fileobj.readline()
+            if not line:
+                selector.unregister(key.fileobj)
+                open_count -= 1
+            else:
+                yield line.strip()
+
+
+def _verify():
+    """Run every part with the build in place; exit 1 naming whatever compiled."""
+    from numba.core import event
+    from fpc_gripper.model import compiled
+    if not compiled.USABLE:
+        print(f'build not usable: {compiled.REASON}')
+        return 1
+    compiles = []
+
+    class Listener(event.Listener):
+        def on_start(self, ev):
+            func = ev.data['dispatcher'].py_func
+            if func.__module__.startswith('fpc_gripper'):
+                compiles.append(f'{func.__module__}.{func.__qualname__}{ev.data["args"]}')
+
+        def on_end(self, ev):
+            pass
+
+    start = time.perf_counter()
+    with event.install_listener('numba:compile', Listener()):
+        _run_parts(list(PARTS), out=open(os.devnull, 'w'))
+    if compiles:
+        print(f'{len(compiles)} compiled at run time: ' + '; '.join(compiles[:5]))
+        return 1
+    print(f'verified: every part ran in {time.perf_counter() - start:.1f} s, nothing compiled')
+    return 0
+
+
+def main(argv=None):
+    """Command line: build (default), or one worker's parts, or the verification."""
+    parser = argparse.ArgumentParser(prog='python -m fpc_gripper.model.build',
+                                     description=__doc__.strip().splitlines()[0])
+    parser.add_argument('--jobs', type=int, default=min(2, os.cpu_count() or 1),
+                        help='processes that compile (default: 2, or 1 on one core)')
+    parser.add_argument('--if-stale', action='store_true',
+                        help='do nothing when the build is already these sources on this '
+                             'machine')
+    parser.add_argument('--parts', help=argparse.SUPPRESS)
+    parser.add_argument('--verify', action='store_true', help=argparse.SUPPRESS)
+    args = parser.parse_args(argv)
+    if args.parts:
+        _run_parts(args.parts.split(','))
+        return 0
+    if args.verify:
+        return _verify()
+    if args.if_stale:
+        from fpc_gripper.model import compiled
+        usable, reason = compiled.build_status()
+        if usable:
+            print(f'fpc_gripper: compiled engine is current ({reason})', file=sys.stderr)
+            return 0
+    try:
+        build(args.jobs)
+    except RuntimeError as exc:
+        print(f'fpc_gripper: {exc}', file=sys.stderr)
+        return 1
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
