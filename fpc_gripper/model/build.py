@@ -200,11 +200,11 @@ def _split(names, jobs):
 
 
 def _merge(workers, into):
-    """Merge the workers' indexes and data into `into` (same function: same file names)."""
+    """Merge the workers' indexes and data into `into`; return the distinct signatures."""
     from numba.core.caching import IndexDataCacheFile
     from fpc_gripper.model import compiled
     stamp = compiled.sources_stamp()
-    count = 0
+    merged = set()
     for directory in workers:
         for index in sorted(pathlib.Path(directory).glob('*.nbi')):
             base = index.name[:-len('.nbi')]
@@ -212,8 +212,8 @@ def _merge(workers, into):
             target = IndexDataCacheFile(str(into), base, stamp)
             for key, name in source._load_index().items():
                 target.save(key, source._load_data(name))
-                count += 1
-    return count
+                merged.add((base, key))
+    return len(merged)
 
 
 def build(jobs=2, log=sys.stderr):
