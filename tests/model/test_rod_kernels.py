@@ -99,6 +99,7 @@ def test_kernels_run_compiled(solvers):
         x, solver._xq.size, *solver._sample_at[1:5], np.array([0.0, 0.5]))
     local = _PointwiseLocal(solver, kap, along, solver._sample_at[4], 1e5)
     local.energy(start, 1e5, [])
+    local.derivatives(start, 1e5, [])   # else only an earlier test's outputs had run it
     names = [name for name in rod_kernels.__all__ if name.endswith('_kernel')]
     assert len(names) == len(rod_kernels.__all__) == 13
     for name in names:
