@@ -82,25 +82,8 @@ def _circle_fit():
     analysis.fit_circle(np.column_stack([x, z]))
 
 
-def _ccm():
-    from fpc_gripper.model import CCMSolver
-    for solver in (CCMSolver(_design(), n_segments=8),
-                   CCMSolver(_design(), n_segments=8, reconstruction='consistent')):
-        free = solver.solve(pressure=1.0e5)
-        _outputs(free)
-        _outputs(solver.solve(pressure=1.01e5, initial=free))
-        _outputs(solver.solve(pressure=1.0e5, tip_force=(0.05, -0.05)))
-        solver.rigidity(pressure=5.0e4, axis='x')
-        solver.rigidity(pressure=5.0e4, axis='z')
-        _engine_calls(solver, (0.05, -0.05))
-    loaded = CCMSolver(_design(), n_segments=8, load_points=(0.045,))
-    _outputs(loaded.solve(pressure=5.0e4, point_loads=[(0.045, 0.0, -0.05)]))
-    _circle_fit()
-
-
-def _pcc():
-    from fpc_gripper.model import PCCSolver
-    solver = PCCSolver(_design(), n_segments=22)
+def _scenes(solver):
+    """Solve cold, warm and loaded, with every output, both rigidities and the engine calls."""
     free = solver.solve(pressure=1.0e5)
     _outputs(free)
     _outputs(solver.solve(pressure=1.01e5, initial=free))
@@ -108,6 +91,20 @@ def _pcc():
     solver.rigidity(pressure=5.0e4, axis='x')
     solver.rigidity(pressure=5.0e4, axis='z')
     _engine_calls(solver, (0.05, -0.05))
+
+
+def _ccm():
+    from fpc_gripper.model import CCMSolver
+    _scenes(CCMSolver(_design(), n_segments=8))
+    _scenes(CCMSolver(_design(), n_segments=8, reconstruction='consistent'))
+    loaded = CCMSolver(_design(), n_segments=8, load_points=(0.045,))
+    _outputs(loaded.solve(pressure=5.0e4, point_loads=[(0.045, 0.0, -0.05)]))
+    _circle_fit()
+
+
+def _pcc():
+    from fpc_gripper.model import PCCSolver
+    _scenes(PCCSolver(_design(), n_segments=22))
 
 
 def _adaptive():
