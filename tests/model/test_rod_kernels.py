@@ -80,6 +80,7 @@ def test_kernels_run_compiled(solvers):
     # Under NUMBA_DISABLE_JIT the kernels would be plain Python and prove nothing.
     solver, _ = solvers
     result = solver.solve(1e5, (0.0, 0.5))
+    result.points                                   # the outputs' kernels
     x = solver._pack(result.state)
     _, grad, hess = solver.derivatives(x, 1e5, [(solver.tip_node, np.array([0.0, 0.5]))])
     solver.energy(x, 1e5, [])
@@ -99,7 +100,9 @@ def test_kernels_run_compiled(solvers):
         x, solver._xq.size, *solver._sample_at[1:5], np.array([0.0, 0.5]))
     local = _PointwiseLocal(solver, kap, along, solver._sample_at[4], 1e5)
     local.energy(start, 1e5, [])
-    local.derivatives(start, 1e5, [])   # else only an earlier test's outputs had run it
+    # And its derivatives and step: else only an earlier test's outputs had run them.
+    _, local_grad, local_hess = local.derivatives(start, 1e5, [])
+    local.step(local_grad, local_hess)
     names = [name for name in rod_kernels.__all__ if name.endswith('_kernel')]
     assert len(names) == len(rod_kernels.__all__) == 13
     for name in names:
