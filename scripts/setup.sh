@@ -28,7 +28,7 @@ if [ -n "$extra" ]; then
 fi
 "${pip[@]}" install -q --no-deps -r requirements.lock
 "${pip[@]}" install -q --no-deps --use-pep517 --no-build-isolation -e .
-# The compiled engine, once (about 2 min on 2 cores; nothing compiles at run time after).
+# The compiled engine, once (about 2.6 min on 2 cores; nothing compiles at run time after).
 .venv/bin/python -m fpc_gripper.model.build --if-stale
 if ! check="$("${pip[@]}" check)"; then
   echo "$check" >&2
