@@ -7,7 +7,7 @@ Measure the Cython spike against numba on the unloaded CCM-8 solve; write the JS
 1. Builds every variant of bench/spike_aot/build.py cold (build dir removed first), in a
    subprocess each, timing the wall clock and reading the .so size.
 2. Warm time per solve, median over repeats of `solves` solves at pressures 0..300 kPa, of
-   (i) CCMSolver.solve (numba), (ii) engine._solve_entry on the kernel data (numba),
+   (i) CCMSolver.solve (numba), (ii) engine.entries._solve_entry on the kernel data (numba),
    (iii) the Cython extension's solve_entry (each variant), (iv) ccm8_cy.py as plain
    Python (a few solves), (v) CCMSolver.solve with the engine entry swapped for the
    Cython one in this process (what the user would see). Ratios against (i), same run.
@@ -98,16 +98,16 @@ class Case:
     def __init__(self, options=None):
         self.solver = CCMSolver(ActuatorDesign.paper(prestrain=0.25), n_segments=8)
         self.data = self.solver.kernel_data(False)
-        self.flat = engine._flat(self.solver)
-        self.opts, self.cap = engine._packed(self.solver, options or self.solver._options,
-                                             self.flat.shape)
+        self.flat = engine.solves._flat(self.solver)
+        self.opts, self.cap = engine.solves._packed(self.solver, options or self.solver._options,
+                                                    self.flat.shape)
         self.nodes, self.forces = kernels.load_arrays([])
 
     def numba(self, pressure, initial=None):
         warm = initial is not None
-        return engine._solve_entry(self.data, initial if warm else self.flat, warm, self.flat,
-                                   float(pressure), self.nodes, self.forces, self.opts,
-                                   self.cap)
+        return engine.entries._solve_entry(self.data, initial if warm else self.flat, warm,
+                                           self.flat, float(pressure), self.nodes,
+                                           self.forces, self.opts, self.cap)
 
     def cython(self, module, problem, pressure, initial=None):
         warm = initial is not None
@@ -120,7 +120,7 @@ def timings(case, modules, repeats, solves, plain, plain_solves):
     pressures = np.linspace(0.0, 300e3, solves)
     solver = case.solver
     problems = {name: module.Problem(case.data) for name, module in modules.items()}
-    entry = engine._solve_entry
+    entry = engine.solves._solve_entry
 
     def patched(module, problem):
         def run(data, initial, warm, flat, pressure, nodes, forces, opts, cap):
@@ -133,12 +133,12 @@ def timings(case, modules, repeats, solves, plain, plain_solves):
             solver.solve(pressure=p)
 
     def full_solve_cython():
-        engine._solve_entry = patched(modules['o3'], problems['o3'])
+        engine.solves._solve_entry = patched(modules['o3'], problems['o3'])
         try:
             for p in pressures:
                 solver.solve(pressure=p)
         finally:
-            engine._solve_entry = entry
+            engine.solves._solve_entry = entry
 
     def numba_entry():
         for p in pressures:

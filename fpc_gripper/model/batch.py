@@ -88,8 +88,8 @@ class _Groups:
         memo = (id(solver), loaded)
         key = self._keys.get(memo)
         if key is None:
-            flat = engine._flat(solver)
-            opts, cap = engine._packed(solver, solver._options, flat.shape)
+            flat = engine.solves._flat(solver)
+            opts, cap = engine.solves._packed(solver, solver._options, flat.shape)
             key = self._keys[memo] = (type(solver.kernel_data(loaded)), flat.shape, opts,
                                       cap.tobytes(), loaded, solver.n_segments)
         return key

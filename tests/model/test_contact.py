@@ -114,7 +114,7 @@ def test_face_point_kinematics_and_loads_against_differences(solver, seed):
 def kkt(solver, con, x, lam, offset=0.0):
     """The bordered system's residual (r, c + E lam) and its Jacobian, from the engine."""
     nodes, forces = np.zeros(0, dtype=np.int64), np.zeros((0, 2))
-    c, comp, brow, grow, urow, vrow, coef, residual, hess = engine._kkt(
+    c, comp, brow, grow, urow, vrow, coef, residual, hess = engine.bordered._kkt(
         con, solver, x, lam, 40e3, nodes, forces, offset)
     n = x.size
     jac = np.zeros((n + c.size, n + c.size))
@@ -135,7 +135,7 @@ def test_contact_rows_are_exact_derivatives(solver, obstacle):
     status[picks] = [ck.NORMAL, ck.STICK, ck.SLIP_POS, ck.SLIP_NEG, ck.NORMAL]
     anchors = solver.point_positions(x, con.pseg, con.poff, con.pz)[con.pair_point] + 1e-3
     con = con._replace(status=status, anchor=anchors, compliance=1e-3)
-    lam = np.random.default_rng(4).standard_normal(engine._row_count(status))
+    lam = np.random.default_rng(4).standard_normal(engine.bordered._row_count(status))
     values, jac = kkt(solver, con, x, lam)
     state = np.concatenate([x, lam])
 

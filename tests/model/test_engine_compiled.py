@@ -19,7 +19,7 @@ from fpc_gripper.model.pcc import PCCSolver
 RTOL = 1e-12
 #: Warm against cold: both converged to xtol = 1e-9 (scaled units) of the one equilibrium.
 WARM_RTOL = 1e-9
-MODEL = pathlib.Path(engine.__file__).resolve().parent
+MODEL = pathlib.Path(engine.__file__).resolve().parents[1]
 
 
 class Interpreted:
@@ -237,8 +237,8 @@ def test_every_hook_is_a_compiled_kernel(kind):
         assert deviation(point, positions[1]) <= RTOL
         assert deviation(jac, solver.point_jacobian(x, seg[1], off[1], z[1])[1]) <= RTOL
         got = hooks['point_derivatives'](data, x, pressure, nodes, forces, seg, off, z, push)
-        want = solver.point_derivatives(x, pressure, engine._loads(nodes, forces), seg, off,
-                                        z, push)
+        loads = engine.interface._loads(nodes, forces)
+        want = solver.point_derivatives(x, pressure, loads, seg, off, z, push)
         assert got[0] == pytest.approx(want[0], rel=1e-12)
         assert deviation(got[1], want[1]) <= RTOL
     for name, hook in hooks.items():
@@ -247,7 +247,8 @@ def test_every_hook_is_a_compiled_kernel(kind):
     # The engine's entries compiled for this namedtuple type.
     engine.solve(solver, 50e3, _loads(solver, (0.1, 0.0) if loaded else (0.0, 0.0)),
                  solver._options)
-    types = {getattr(sig[0], 'instance_class', None) for sig in engine._solve_entry.signatures}
+    signatures = engine.entries._solve_entry.signatures
+    types = {getattr(sig[0], 'instance_class', None) for sig in signatures}
     assert type(data) in types
 
 
@@ -331,16 +332,16 @@ def test_dense_hook_factor_is_the_cholesky_factor_of_its_hessian():
 
 
 # -- the disk cache and warm starts ---------------------------------------------------------
-ENTRIES = ('_newton_entry', '_solve_entry', '_rigidity_entry', '_solve_batch_entry',
-           '_rigidity_batch_entry')
+ENTRIES = ('_newton_entry', '_solve_entry', '_rigidity_entry', '_contact_entry',
+           '_solve_batch_entry', '_rigidity_batch_entry')
 
 
 @pytest.mark.parametrize('entry', ENTRIES)
 def test_cache_stamp_covers_every_model_source(entry):
     # Each entry inlines kernels of other modules: its stamp is the whole model's content.
-    cache_file = getattr(engine, entry)._cache._cache_file
-    assert cache_file._source_stamp == compiled.sources_stamp(MODEL)
-    assert isinstance(getattr(engine, entry)._cache, compiled._Cache)
+    dispatcher = getattr(engine.entries, entry)
+    assert dispatcher._cache._cache_file._source_stamp == compiled.sources_stamp(MODEL)
+    assert isinstance(dispatcher._cache, compiled._Cache)
 
 
 def test_the_stamp_follows_content_not_mtimes(tmp_path):
@@ -367,7 +368,7 @@ def test_cache_index_goes_stale_when_a_kernel_source_changes():
     # entries load, and an index read under another stamp (an edited source) is empty.
     solver = CCMSolver(ActuatorDesign.paper(0.25), 8)
     engine.solve(solver, 10e3, [], solver._options)
-    cache_file = engine._solve_entry._cache._cache_file
+    cache_file = engine.entries._solve_entry._cache._cache_file
     assert cache_file._load_index()                       # built: entries found
     stale = copy.copy(cache_file)
     stale._source_stamp = compiled.sources_stamp(MODEL) + '-edited'

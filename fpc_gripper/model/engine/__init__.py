@@ -1,0 +1,21 @@
+"""
+The one equilibrium engine: damped Newton, continuation, the bordered Newton of constraints.
+
+A discretisation hands the engine its hooks (`interface`); the loops are written once
+(`newton`, `bordered`, `active_set`) and run compiled through the entries (`entries`) or
+interpreted on a Python object; the Python front (`solves`, `contact_solves`, `batches`)
+packs the inputs, calls an entry and returns an outcome (`outcomes`).
+"""
+
+from .batches import BatchOutcome, BatchRigidity, rigidity_batch, solve_batch
+from .bordered import ContactSet, NodeLine
+from .contact_solves import (contact_path, contact_solve, contact_step, ContactOutcome,
+                             next_anchors)
+from .interface import linear_solve, linear_step
+from .outcomes import BorderedOutcome, NewtonOptions, NewtonOutcome, SolverStatus
+from .solves import newton, rigidity, sensitivity, solve
+
+__all__ = ['SolverStatus', 'NewtonOptions', 'NewtonOutcome', 'newton', 'solve', 'rigidity',
+           'linear_step', 'linear_solve', 'BorderedOutcome', 'solve_batch', 'rigidity_batch',
+           'BatchOutcome', 'BatchRigidity', 'sensitivity', 'ContactSet', 'NodeLine',
+           'ContactOutcome', 'contact_solve', 'contact_step', 'contact_path', 'next_anchors']

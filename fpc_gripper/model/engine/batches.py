@@ -1,0 +1,195 @@
+"""The engine's Python front for batches: S independent scenes on both cores."""
+
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+
+from .entries import _rigidity_batch_entry, _solve_batch_entry
+from .solves import _compiled, _flat, _packed
+from ..compiled import over_cores
+
+
+# -- batches -------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class BatchOutcome:
+    """
+    Equilibria of S independent scenes (internal: `batch` builds its results from it).
+
+    Attributes
+    ----------
+    states : ndarray, shape (S,) + unknowns
+    status : ndarray of int, shape (S,)
+        `SolverStatus` codes.
+    iterations : ndarray of int, shape (S,)
+    gradient, step, min_eig, fraction : ndarray, shape (S,)
+        As in `NewtonOutcome`.
+    tips : ndarray, shape (S, 2)
+        Position of the tip node [m].
+
+    """
+
+    states: np.ndarray
+    status: np.ndarray
+    iterations: np.ndarray
+    gradient: np.ndarray
+    step: np.ndarray
+    min_eig: np.ndarray
+    fraction: np.ndarray
+    tips: np.ndarray
+
+
+@dataclass(frozen=True)
+class BatchRigidity:
+    """
+    Displacement-controlled solves of S scenes (internal; see `rigidity_batch`).
+
+    Attributes
+    ----------
+    unloaded : BatchOutcome
+        The unloaded solves (`tips` of the unloaded states).
+    states : ndarray, shape (S,) + unknowns
+        Loaded states (the unloaded one where that failed).
+    force : ndarray, shape (S,)
+        End load magnitude along the direction [N]; NaN where not found.
+    iterations : ndarray of int, shape (S,)
+        Bordered Newton iterations.
+    fraction : ndarray, shape (S,)
+        Fraction of the displacement reached.
+    stable : ndarray of bool, shape (S,)
+        Loaded state stable under force control.
+    gradient : ndarray, shape (S,)
+        Relative gradient of the loaded state.
+    tips : ndarray, shape (S, 2)
+        Loaded tip [m]; NaN where not found.
+
+    """
+
+    unloaded: BatchOutcome
+    states: np.ndarray
+    force: np.ndarray
+    iterations: np.ndarray
+    fraction: np.ndarray
+    stable: np.ndarray
+    gradient: np.ndarray
+    tips: np.ndarray
+
+
+def _batch_inputs(problems, loaded, options):
+    """Typed list of compiled discretisations, flat state, options and cap; checks them."""
+    datas = [_compiled(problem, loaded) for problem in problems]
+    if not datas or any(data is None for data in datas):
+        raise TypeError('`problems` must be a non-empty sequence of discretisations that run '
+                        'compiled (with `kernel_data`)')
+    flat = _flat(problems[0])
+    opts, cap = _packed(problems[0], options, flat.shape)
+    for problem, data in zip(problems, datas):
+        other = _flat(problem)
+        if type(data) is not type(datas[0]) or other.shape != flat.shape \
+                or _packed(problem, options, flat.shape)[0] != opts \
+                or not np.array_equal(_packed(problem, options, flat.shape)[1], cap):
+            raise ValueError('`problems` must share one discretisation type, number of '
+                             'unknowns and options')
+    return numba.typed.List(datas), flat, opts, cap
+
+
+def _index(design, pressures, count):
+    design = np.ascontiguousarray(design, dtype=np.int64)
+    pressures = np.ascontiguousarray(pressures, dtype=float)
+    if design.shape != pressures.shape or design.ndim != 1:
+        raise ValueError('`design` and `pressures` must be 1-d of one length, got shapes '
+                         f'{design.shape} and {pressures.shape}')
+    if design.size and not (0 <= design.min() and design.max() < count):
+        raise ValueError(f'`design` indices must lie in [0, {count})')
+    return design, pressures
+
+
+def solve_batch(problems, design, pressures, nodes, forces, options, tip, initial=None):
+    """
+    Solves of S independent scenes in compiled loops over both cores (`over_cores`).
+
+    Scene i is `solve(problems[design[i]], pressures[i], loads_i, options, initial[i])`,
+    loads_i being `forces[i]` at `nodes`: the same arithmetic, so the same answer.
+
+    Parameters
+    ----------
+    problems : sequence of discretisation
+        Each with ``kernel_data``; one type, unknowns' shape and options.
+    design : array_like of int, shape (S,)
+        Index into `problems` of every scene.
+    pressures : array_like, shape (S,)
+        [Pa].
+    nodes : array_like of int, shape (K,)
+        Loaded nodes, shared by all scenes (K = 0: unloaded).
+    forces : array_like, shape (S, K, 2)
+        [N].
+    options : NewtonOptions
+    tip : int
+        Node whose position is returned.
+    initial : array_like, shape (S,) + unknowns, optional
+        Warm starts [scaled units]; None: every scene from the flat state.
+
+    Returns
+    -------
+    BatchOutcome
+
+    """
+    design, pressures = _index(design, pressures, len(problems))
+    nodes = np.ascontiguousarray(nodes, dtype=np.int64).reshape(-1)
+    forces = np.ascontiguousarray(forces, dtype=float).reshape(pressures.size, nodes.size, 2)
+    datas, flat, opts, cap = _batch_inputs(problems, nodes.size > 0, options)
+    if initial is None:
+        initial = np.zeros((0,) + flat.shape)
+    else:
+        initial = np.ascontiguousarray(initial, dtype=float)
+        if initial.shape != (pressures.size,) + flat.shape:
+            raise ValueError(f'`initial` must have shape {(pressures.size,) + flat.shape}, '
+                             f'got {initial.shape}')
+    warm = initial.shape[0] > 0
+
+    def run(lo, hi):
+        return _solve_batch_entry(datas, design[lo:hi], pressures[lo:hi], nodes, forces[lo:hi],
+                                  initial[lo:hi] if warm else initial, flat, opts, cap,
+                                  int(tip))
+    states, status, iterations, figures = over_cores(run, pressures.size)
+    return BatchOutcome(states, status, iterations, *figures[:, :4].T, figures[:, 4:])
+
+
+def rigidity_batch(problems, design, pressures, node, direction, displacement, options):
+    """
+    `rigidity` of S scenes after their cold unloaded solves, compiled over both cores.
+
+    Parameters
+    ----------
+    problems : sequence of discretisation
+        As for `solve_batch`.
+    design : array_like of int, shape (S,)
+    pressures : array_like, shape (S,)
+        [Pa].
+    node : int
+        Loaded node (the tip).
+    direction : array_like (2,)
+        Unit load and displacement direction.
+    displacement : float
+        [m].
+    options : NewtonOptions
+
+    Returns
+    -------
+    BatchRigidity
+
+    """
+    design, pressures = _index(design, pressures, len(problems))
+    free, flat, opts, cap = _batch_inputs(problems, False, options)
+    loaded = _batch_inputs(problems, True, options)[0]
+    direction = np.ascontiguousarray(direction, dtype=float)
+
+    def run(lo, hi):
+        return _rigidity_batch_entry(free, loaded, design[lo:hi], pressures[lo:hi], int(node),
+                                     direction, float(displacement), flat, opts, cap)
+    out = over_cores(run, pressures.size)
+    unloaded_x, status, states, iterations, figures = out
+    unloaded = BatchOutcome(unloaded_x, status, iterations[:, 0], *figures[:, :4].T,
+                            np.full((pressures.size, 2), np.nan))
+    return BatchRigidity(unloaded, states, figures[:, 4], iterations[:, 1], figures[:, 5],
+                         figures[:, 6] == 1.0, figures[:, 7], figures[:, 8:10])
