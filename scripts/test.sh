@@ -3,6 +3,6 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 scripts/setup.sh
-# Two workers, one per core: most of a fresh run is numba compiling the engine's entries, one
-# core each. A file's tests stay on one worker (they share module fixtures and contexts).
+# Two workers, one per core (nothing compiles in the tests: set-up built the engine). A file's
+# tests stay on one worker (they share module fixtures and contexts).
 exec scripts/isolated .venv/bin/python -m pytest tests -n 2 --dist loadfile "$@"
