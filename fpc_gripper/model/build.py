@@ -326,7 +326,7 @@ def _verify():
     class Listener(event.Listener):
         def on_start(self, ev):
             func = ev.data['dispatcher'].py_func
-            if func.__module__.startswith('fpc_gripper'):
+            if func.__module__.startswith('fpc_gripper') or func in compiled._ADOPTED:
                 compiles.append(f'{func.__module__}.{func.__qualname__}{ev.data["args"]}')
 
         def on_end(self, ev):

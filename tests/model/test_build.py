@@ -26,15 +26,17 @@ class Listener(event.Listener):
     def on_end(self, ev):
         pass
 event.register('numba:compile', Listener())
-from fpc_gripper.model import ActuatorDesign, CCMSolver, compiled
+from fpc_gripper.model import ActuatorDesign, batch, CCMSolver, compiled
 from fpc_gripper.model.pipeline import finger_model
 design = ActuatorDesign.paper(prestrain=0.25)
 ccm = CCMSolver(design, n_segments=8).solve(pressure=1.0e5)
 default = finger_model(design).solve(pressure=1.0e5, tip_force=(0.1, -0.2))
 k = CCMSolver(design, n_segments=8).rigidity(pressure=0.0, axis='x')
+# A batch hands its entry a numba typed list: numba's own list helpers come from the build.
+grid = batch.solve_grid([design, ActuatorDesign.paper(prestrain=0.3)], [0.0, 1.0e5])
 print(json.dumps({'usable': compiled.USABLE, 'reason': compiled.REASON,
                   'ccm': ccm.coefficients.tolist(), 'default_tip': default.tip.tolist(),
-                  'k': k.value, 'compiles': compiles}))
+                  'k': k.value, 'grid_tip': grid.tip.tolist(), 'compiles': compiles}))
 """
 
 
@@ -43,7 +45,10 @@ def _reference():
     return {'ccm': CCMSolver(design, n_segments=8).solve(pressure=1.0e5).coefficients,
             'default_tip': finger_model(design).solve(pressure=1.0e5,
                                                       tip_force=(0.1, -0.2)).tip,
-            'k': CCMSolver(design, n_segments=8).rigidity(pressure=0.0, axis='x').value}
+            'k': CCMSolver(design, n_segments=8).rigidity(pressure=0.0, axis='x').value,
+            # Each scene alone, through the single-scene front end (not the batch).
+            'grid_tip': [[finger_model(d).solve(pressure=p).tip for p in (0.0, 1.0e5)]
+                         for d in (design, ActuatorDesign.paper(prestrain=0.3))]}
 
 
 def _copy_package(tmp_path):
@@ -108,6 +113,8 @@ def test_a_read_only_copy_with_an_empty_home_loads_and_compiles_nothing(tmp_path
     np.testing.assert_allclose(out['default_tip'], reference['default_tip'], rtol=0,
                                atol=1e-12)
     np.testing.assert_allclose(out['k'], reference['k'], rtol=1e-12)
+    np.testing.assert_allclose(np.squeeze(out['grid_tip'], axis=2), reference['grid_tip'],
+                               rtol=0, atol=1e-9)
     assert not any(home.rglob('*.nbi')), 'numba wrote a cache into the empty HOME'
 
 
