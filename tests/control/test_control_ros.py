@@ -120,10 +120,12 @@ class Rig:
     def now(self):
         return self.probe.get_clock().now().nanoseconds * 1e-9
 
-    def spin_until(self, condition, timeout=15.0):
+    def spin_until(self, condition, timeout=15.0, every=None):
         deadline = time.monotonic() + timeout
         while not condition():
             assert time.monotonic() < deadline, 'condition not met in time'
+            if every is not None:
+                every()
             self.executor.spin_once(timeout_sec=0.01)
 
     def spin_for(self, seconds, every=None):
@@ -274,8 +276,14 @@ def test_lost_pressure_feedback_holds_when_asked(rig):
         for name, pub in r.pressure_pubs.items():
             pub.publish(FluidPressure(fluid_pressure=ATM + 200.0e3))
 
+    def pressurised():
+        sent = r.commands[FINGERS[0]]
+        return bool(sent) and sent[-1].fluid_pressure > ATM + 100.0e3
+
     r.goal('aperture', 0.100)
-    r.spin_for(0.6, every=feed)
+    # Fed until the command has risen (on a loaded machine that takes more than the 0.6 s
+    # of wall time it takes here idle), then not at all.
+    r.spin_until(pressurised, timeout=15.0, every=feed)
     r.spin_until(lambda: r.state()['mode'] == 'safe', timeout=3.0)
     count = len(r.commands[FINGERS[0]])
     held = r.commands[FINGERS[0]][-1].fluid_pressure
