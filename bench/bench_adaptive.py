@@ -13,8 +13,7 @@ sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 from timing import machine  # noqa: E402
 
 from fpc_gripper.model import ActuatorDesign, AdaptiveSolver, RodSolver  # noqa: E402
-from fpc_gripper.model.pipeline import DEFAULT_TOLERANCE  # noqa: E402
-from fpc_gripper.model.selection import make_solver  # noqa: E402
+from fpc_gripper.model.pipeline import DEFAULT_TOLERANCE, finger_model, ModelSettings  # noqa: E402,E501
 
 RESULTS = pathlib.Path(__file__).resolve().parent / 'results' / 'adaptive.json'
 
@@ -60,13 +59,18 @@ def main(argv=None):
     design = ActuatorDesign.paper(prestrain=0.25)
     steps = session()
     _, reference, _ = run_session(RodSolver(design), steps)
+
+    def fixed(rung, n):
+        # finger_model shares one solver per settings; each run here builds its own.
+        return finger_model.__wrapped__(design, ModelSettings(rung=rung, n_segments=n))
+
     methods = {
         f'adaptive (tolerance {args.tolerance * 1e3:g} mm)':
             lambda: AdaptiveSolver(design, tolerance=args.tolerance),
-        'fixed CCM16 (paper)': lambda: make_solver('ccm', 16, design),
-        'fixed CCM8 (paper)': lambda: make_solver('ccm', 8, design),
-        'fixed aligned consistent CCM44': lambda: make_solver('ccm_aligned', 44, design),
-        'fixed PCC32': lambda: make_solver('pcc', 32, design),
+        'fixed CCM16 (paper)': lambda: fixed('ccm', 16),
+        'fixed CCM8 (paper)': lambda: fixed('ccm', 8),
+        'fixed aligned consistent CCM44': lambda: fixed('ccm_aligned', 44),
+        'fixed PCC32': lambda: fixed('pcc', 32),
         'rod (reference)': lambda: RodSolver(design),
     }
     rows = []

@@ -17,7 +17,6 @@ from equilibrium_checks import random_scenes  # noqa: E402
 from timing import machine  # noqa: E402
 
 from fpc_gripper.model.pipeline import finger_model, model_label, ModelSettings  # noqa: E402
-from fpc_gripper.model.selection import make_solver  # noqa: E402
 
 RESULTS = ROOT / 'bench' / 'results' / 'sweep_solvers.json'
 
@@ -25,9 +24,9 @@ RESULTS = ROOT / 'bench' / 'results' / 'sweep_solvers.json'
 SOLVERS = {
     'adaptive (default)': lambda d: finger_model(d, ModelSettings()),
     'paper CCM8': lambda d: finger_model(d, ModelSettings(tolerance=0.0)),
-    'arc': lambda d: make_solver('arc', 1, d),
-    'pcc N=22': lambda d: make_solver('pcc', 22, d),
-    'rod': lambda d: make_solver('rod', 0, d),
+    'arc': lambda d: finger_model(d, ModelSettings(rung='arc')),
+    'pcc N=22': lambda d: finger_model(d, ModelSettings(rung='pcc', n_segments=22)),
+    'rod': lambda d: finger_model(d, ModelSettings(rung='rod')),
 }
 
 

@@ -13,10 +13,10 @@ from .parameters import FitParameters
 from ..model import engine
 from ..model.design import ActuatorDesign
 from ..model.materials import emc_stress
-from ..model.pcc import PCCSolver
+from ..model.pipeline import finger_model, ModelSettings
 from ..model.solver import AXES
 
-__all__ = ['calibrate', 'CalibrationResult', 'CalibrationStatus', 'FIT_SEGMENTS',
+__all__ = ['calibrate', 'pcc_model', 'CalibrationResult', 'CalibrationStatus', 'FIT_SEGMENTS',
            'DEFAULT_FIT', 'IDENTIFIABLE_RSE']
 
 #: Segments of the PCC the fit uses for every scene and every parameter value: one fixed
@@ -149,6 +149,11 @@ class _Scene:
     rates: np.ndarray = None
 
 
+def pcc_model(design, n_segments):
+    """Return the finger the fit models: the PCC with `n_segments`, from the finger pipeline."""
+    return finger_model(design, ModelSettings(rung='pcc', n_segments=n_segments))
+
+
 class _Problem:
     """
     Residuals r(u) and their exact Jacobian for `least_squares`.
@@ -185,7 +190,7 @@ class _Problem:
                 raise _ModelFailure(CalibrationStatus.INVALID_DESIGN,
                                     f'the parameters {self.params.split(theta)} make no '
                                     f'valid design: {exc}') from None
-            self._memo = (key, {'solver': PCCSolver(design, self.n_segments), 'scenes': {}})
+            self._memo = (key, {'solver': pcc_model(design, self.n_segments), 'scenes': {}})
         return self._memo[1]
 
     def _scene(self, model, pressure, force, sensitivities):

@@ -7,10 +7,10 @@ import pathlib
 import numpy as np
 import yaml
 
+from .fit import pcc_model
 from ..io.config import default_gripper_config_path, load_gripper_config
 from ..io.mcap_writer import atomic_output
 from ..model.analysis import fit_circle, flexural_rigidity
-from ..model.pcc import PCCSolver
 
 __all__ = ['write_outputs', 'plot_report']
 
@@ -95,7 +95,7 @@ def plot_report(result, path, size=(1500, 1100), dpi=100):
     fig.suptitle(f'fpc-calibrate: {title}, model {result.settings["model"]}\n'
                  + ', '.join(_estimate_text(result, n) for n in result.estimates),
                  fontsize='medium')
-    solver = PCCSolver(result.design, result.settings['n_segments']) \
+    solver = pcc_model(result.design, result.settings['n_segments']) \
         if result.design is not None else None
     frames = _frames(result, solver)
     _plot_shapes(_axes(axes[0, 0], 'shapes: measured markers and model', 'X [mm]', 'Z [mm]'),

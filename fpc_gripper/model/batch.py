@@ -334,6 +334,11 @@ def solve_grid(designs, pressures, tip_forces=((0.0, 0.0),), settings=ModelSetti
     for d, design in enumerate(designs):
         model = out._models[d] = finger_model(design, settings)
         base = d * per_design
+        if not isinstance(model, AdaptiveSolver) and not hasattr(model, 'kernel_data'):
+            # A fixed rung that does not run compiled (the rod): its own solves.
+            for k in range(per_design):
+                out._single(base + k, model.solve(scene_p[k], scene_f[k]))
+            continue
         if not isinstance(model, AdaptiveSolver):
             # One solver for the whole design: its loaded and unloaded scenes as two blocks.
             for loaded in (False, True):

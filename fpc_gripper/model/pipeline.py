@@ -7,20 +7,21 @@ import math
 import numpy as np
 
 from .design import ActuatorDesign
-from .pcc import PCCSolver
-from .selection import AdaptiveSolver
-from .solver import CCMSolver, check_pressure_model
+from .selection import AdaptiveSolver, make_solver, RUNGS
+from .solver import check_pressure_model
 
-__all__ = ['DEFAULT_TOLERANCE', 'DEFAULT_N_SEGMENTS', 'MAX_SEGMENTS', 'ModelSettings',
-           'finger_model', 'contact_model', 'contact_segments', 'model_label', 'rung_label',
-           'solver_label']
+__all__ = ['DEFAULT_TOLERANCE', 'DEFAULT_N_SEGMENTS', 'MAX_SEGMENTS', 'MAX_RUNG_SEGMENTS',
+           'ModelSettings', 'finger_model', 'contact_model', 'contact_segments', 'model_label',
+           'rung_label', 'solver_label']
 
 #: Default tip-position tolerance against the geometrically exact rod [m].
 DEFAULT_TOLERANCE = 5e-5
 #: Segments of the fixed paper CCM that tolerance 0 selects.
 DEFAULT_N_SEGMENTS = 8
-#: Largest fixed N a setting may ask for.
+#: Largest N of the paper CCM a setting may ask for (the nodes' `n_segments` range).
 MAX_SEGMENTS = 64
+#: Largest N of a rung named in the settings: the ladder's finest PCC (contact, 0.94 um).
+MAX_RUNG_SEGMENTS = 128
 
 
 @dataclass(frozen=True)
@@ -39,12 +40,17 @@ class ModelSettings:
     pressure_model : {'design', 'adiabatic', 'isobaric'}
         Pressure work: 'design' (or None; the default) uses the design's
         `pressure_work_factor`, the others fix k_p (2.5, 1).
+    rung : {'auto'} or one of `selection.RUNGS`
+        'auto' (the default): the model `tolerance` selects, as above. A rung name fixes
+        that rung with `n_segments` segments (the arc and the rod ignore N), whatever
+        the tolerance: what calibration, contact and the benchmarks ask for.
 
     """
 
     tolerance: float = DEFAULT_TOLERANCE
     n_segments: int = DEFAULT_N_SEGMENTS
     pressure_model: str = 'design'
+    rung: str = 'auto'
 
     def __post_init__(self):
         tolerance = self.tolerance
@@ -54,13 +60,22 @@ class ModelSettings:
         if not (math.isfinite(tolerance) and tolerance >= 0.0):
             raise ValueError(f'`tolerance` must be finite and >= 0 [m], got {tolerance}')
         object.__setattr__(self, 'tolerance', float(tolerance))
+        if self.rung != 'auto' and self.rung not in RUNGS:
+            raise ValueError(f"`rung` must be 'auto' or one of {list(RUNGS)}, "
+                             f'got {self.rung!r}')
+        top = MAX_SEGMENTS if self.rung == 'auto' else MAX_RUNG_SEGMENTS
         n = self.n_segments
-        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) \
-                or not 1 <= n <= MAX_SEGMENTS:
-            raise ValueError(f'`n_segments` must be an integer in [1, {MAX_SEGMENTS}], '
-                             f'got {n!r}')
+        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or not 1 <= n <= top:
+            raise ValueError(f'`n_segments` must be an integer in [1, {top}], got {n!r}')
         object.__setattr__(self, 'n_segments', int(n))
         object.__setattr__(self, 'pressure_model', check_pressure_model(self.pressure_model))
+
+    @property
+    def fixed(self):
+        """The (rung, N) these settings fix, or None where the tolerance selects per scene."""
+        if self.rung != 'auto':
+            return self.rung, self.n_segments
+        return None if self.tolerance > 0.0 else ('ccm', self.n_segments)
 
 
 @functools.lru_cache(maxsize=32)
@@ -68,8 +83,9 @@ def finger_model(design, settings=ModelSettings()):
     """
     Return the solver of a finger: the only way the package builds one for a consumer.
 
-    The node, `fpc-mcap replay-model`, the controller's inverse and the virtual object
-    all call this, so that they compute the same finger. The solver is a pure function
+    The node, `fpc-mcap replay-model`, the controller's inverse, the virtual object,
+    `fpc-design`, `fpc-grasp` (through `contact_model`) and calibration all call this, so
+    that they compute the same finger. The solver is a pure function
     of its inputs (warm starts change iteration counts, never answers), so one instance
     per (design, settings) is shared.
 
@@ -80,20 +96,21 @@ def finger_model(design, settings=ModelSettings()):
 
     Returns
     -------
-    AdaptiveSolver or CCMSolver
-        `AdaptiveSolver(design, tolerance)` when `settings.tolerance` > 0, else the
-        paper `CCMSolver(design, n_segments)`.
+    AdaptiveSolver or the solver of one rung
+        `AdaptiveSolver(design, tolerance)` when the settings fix no rung
+        (`ModelSettings.fixed` is None), else that rung's solver: the paper
+        `CCMSolver(design, n_segments)` for tolerance 0.
 
     """
     if not isinstance(design, ActuatorDesign):
         raise TypeError(f'`design` must be an ActuatorDesign, got {type(design).__name__}')
     if not isinstance(settings, ModelSettings):
         raise TypeError(f'`settings` must be a ModelSettings, got {type(settings).__name__}')
-    if settings.tolerance > 0.0:
+    fixed = settings.fixed
+    if fixed is None:
         return AdaptiveSolver(design, tolerance=settings.tolerance,
                               pressure_model=settings.pressure_model)
-    return CCMSolver(design, n_segments=settings.n_segments,
-                     pressure_model=settings.pressure_model)
+    return make_solver(*fixed, design, settings.pressure_model)
 
 
 #: PCC segment counts for contact, with their worst tip error against the rod over the loaded
@@ -138,12 +155,11 @@ def contact_model(design, settings=ModelSettings()):
     PCCSolver
 
     """
-    if not isinstance(design, ActuatorDesign):
-        raise TypeError(f'`design` must be an ActuatorDesign, got {type(design).__name__}')
     if not isinstance(settings, ModelSettings):
         raise TypeError(f'`settings` must be a ModelSettings, got {type(settings).__name__}')
-    return PCCSolver(design, n_segments=contact_segments(settings.tolerance),
-                     pressure_model=settings.pressure_model)
+    return finger_model(design, ModelSettings(
+        tolerance=settings.tolerance, n_segments=contact_segments(settings.tolerance),
+        pressure_model=settings.pressure_model, rung='pcc'))
 
 
 def model_label(result):

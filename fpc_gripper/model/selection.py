@@ -1,6 +1,7 @@
 """Model selection on the ladder (arc, CCM-N, rod) and automatic segment refinement."""
 
 import bisect
+import copy
 from dataclasses import dataclass
 import functools
 import json
@@ -95,14 +96,13 @@ class ModelChoice:
     reason: str
     cost: float = float('nan')
 
-    def make_solver(self, design, pressure_model=None):
-        """Build the solver of this choice for a design."""
-        return make_solver(self.rung, self.n_segments, design, pressure_model)
-
 
 def make_solver(rung, n_segments, design, pressure_model=None):
     """
-    Build the solver of a rung.
+    Build the solver of a rung: the factory behind `pipeline.finger_model`.
+
+    Consumers build a finger with `finger_model(design, ModelSettings(rung=...))`; this
+    is what it and `AdaptiveSolver` call.
 
     Parameters
     ----------
@@ -551,11 +551,17 @@ class AdaptiveSolver:
 
     @staticmethod
     def _labelled(result, choice, n):
-        """Return `result` with its `model_choice`: the chosen rung at the N used."""
-        result.model_choice = ModelChoice(choice.rung, n, choice.predicted_error,
-                                          choice.reason if n == choice.n_segments else
-                                          f'{choice.reason}; refined to N = {n}', choice.cost)
-        return result
+        """
+        Return a copy of `result` with its `model_choice`: the chosen rung at the N used.
+
+        A copy, so that the rung's own result (which a warm start may hold) never changes
+        after its solve returned it.
+        """
+        labelled = copy.copy(result)
+        labelled.model_choice = ModelChoice(choice.rung, n, choice.predicted_error,
+                                            choice.reason if n == choice.n_segments else
+                                            f'{choice.reason}; refined to N = {n}', choice.cost)
+        return labelled
 
     def rigidity(self, pressure=0.0, axis='x', displacement=0.010, initial=None):
         """Flexural rigidity with the model the unloaded scene needs; see `CCMSolver`."""

@@ -347,7 +347,7 @@ def test_engine_batches_reject_mixed_problems(make, exc, match):
     ('ccm_aligned', 22, 'ccm_aligned N=22'), ('pcc', 22, 'pcc N=22'), ('arc', 1, 'arc'),
 ])
 def test_model_label_names_the_rung_of_an_unlabelled_result(rung, n, label):
-    from fpc_gripper.model.selection import make_solver
-    result = make_solver(rung, n, ActuatorDesign.paper(0.25)).solve(50e3)
+    result = finger_model(ActuatorDesign.paper(0.25),
+                          ModelSettings(rung=rung, n_segments=n)).solve(50e3)
     assert not hasattr(result, 'model_choice')
     assert model_label(result) == label

@@ -11,7 +11,7 @@ from fpc_gripper.model import (ActuatorDesign, AdaptiveSolver, CCMSolver, choose
                                RodSolver, Scene, SolverStatus)
 from fpc_gripper.model.pipeline import finger_model, ModelSettings
 from fpc_gripper.model.section_law import station_layout
-from fpc_gripper.model.selection import a_posteriori_error, load_error_model, make_solver
+from fpc_gripper.model.selection import a_posteriori_error, load_error_model
 
 _GX, _GW = np.polynomial.legendre.leggauss(6)
 
@@ -191,7 +191,8 @@ def test_choose_model_bound_holds(prestrain, pressure, force, tolerance):
     design = ActuatorDesign.paper(prestrain)
     choice = choose_model(Scene(design, pressure, force), tolerance)
     assert choice.predicted_error <= tolerance
-    result = choice.make_solver(design).solve(pressure, force)
+    settings = ModelSettings(rung=choice.rung, n_segments=choice.n_segments)
+    result = finger_model(design, settings).solve(pressure, force)
     rod = RodSolver(design).solve(pressure, force)
     assert result.success and rod.success
     assert np.linalg.norm(result.tip - rod.tip) <= choice.predicted_error + 1e-9, choice
@@ -199,7 +200,7 @@ def test_choose_model_bound_holds(prestrain, pressure, force, tolerance):
         estimate = a_posteriori_error(Scene(design, pressure, force), choice.rung,
                                       choice.n_segments)
         assert np.isfinite(estimate)
-    assert make_solver('rod', 0, design).solve(pressure, force).success
+    assert finger_model(design, ModelSettings(rung='rod')).solve(pressure, force).success
 
 
 def test_choose_model_never_reads_a_measured_time():
