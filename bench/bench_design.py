@@ -82,7 +82,8 @@ class _Stages:
     """Time spent in the pieces a sweep calls, by wrapping them for one run [s]."""
 
     def __init__(self):
-        from fpc_gripper.model import engine, selection, shape_kernels
+        from fpc_gripper.model import engine, selection
+        from fpc_gripper.model.kernels import shapes as shape_kernels
         self.targets = [(batch, 'finger_model', 'build models (finger_model)'),
                         (selection.AdaptiveSolver, 'choose_many', 'choose models'),
                         (engine, 'solve_batch', 'compiled equilibria (solve_batch)'),

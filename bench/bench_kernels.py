@@ -13,7 +13,8 @@ from timing import machine, numba_cache_files, run_process  # noqa: E402
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / 'tests' / 'model'))
 import ccm_reference as reference  # noqa: E402, I100 (the numpy formulas the kernels replaced)
-from fpc_gripper.model import ActuatorDesign, CCMSolver, kernels  # noqa: E402, I100, I201
+from fpc_gripper.model import ActuatorDesign, CCMSolver  # noqa: E402, I100, I201
+from fpc_gripper.model.kernels import ccm as kernels  # noqa: E402, I100, I201
 
 RESULTS = pathlib.Path(__file__).resolve().parent / 'results' / 'kernels.json'
 PRESTRAIN, PRESSURE, N_SEGMENTS = 0.25, 100e3, 8

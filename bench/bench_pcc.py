@@ -39,8 +39,9 @@ from bench_ladder import PRESTRAINS, scenes  # noqa: E402, I100
 from pcc_reference import ReferencePCCSolver  # noqa: E402
 from timing import machine, median_time, numba_cache_files, run_process  # noqa: E402
 
-from fpc_gripper.model import ActuatorDesign, pcc_kernels, RodSolver  # noqa: E402
-from fpc_gripper.model.pcc import PCCSolver  # noqa: E402
+from fpc_gripper.model import ActuatorDesign, RodSolver  # noqa: E402
+from fpc_gripper.model.discretisations.pcc import PCCSolver  # noqa: E402
+from fpc_gripper.model.kernels import pcc as pcc_kernels  # noqa: E402
 
 RESULTS = pathlib.Path(__file__).resolve().parent / 'results' / 'pcc.json'
 N_VALUES = (16, 32, 64, 128, 256)
@@ -59,7 +60,7 @@ FIRST_CALLS = """
 import time
 t0 = time.perf_counter()
 from fpc_gripper.model import ActuatorDesign
-from fpc_gripper.model.pcc import PCCSolver
+from fpc_gripper.model.discretisations.pcc import PCCSolver
 t1 = time.perf_counter()
 s = PCCSolver(ActuatorDesign.paper(0.25), 24)
 t2 = time.perf_counter()

@@ -14,7 +14,7 @@ sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 from timing import machine, median_time  # noqa: E402
 
 from fpc_gripper.model import ActuatorDesign, batch, CCMSolver, RodSolver  # noqa: E402
-from fpc_gripper.model.kinematics import node_positions, to_scaled  # noqa: E402
+from fpc_gripper.model.discretisations.ccm_geometry import node_positions, to_scaled  # noqa: E402
 from fpc_gripper.model.pipeline import finger_model, ModelSettings  # noqa: E402
 
 RESULTS = pathlib.Path(__file__).resolve().parent / 'results' / 'solver.json'

@@ -35,8 +35,8 @@ ROOT = pathlib.Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from fpc_gripper.model import ActuatorDesign, CCMSolver, engine, RodSolver  # noqa: E402
-from fpc_gripper.model.kinematics import node_positions  # noqa: E402
-from fpc_gripper.model.solver import SolverStatus  # noqa: E402
+from fpc_gripper.model.discretisations.ccm import SolverStatus  # noqa: E402
+from fpc_gripper.model.discretisations.ccm_geometry import node_positions  # noqa: E402
 
 PRESTRAINS = (0.05, 0.15, 0.25, 0.40, 0.60)
 PRESSURES = (0.0, 100e3, 200e3, 300e3, 400e3, 500e3)

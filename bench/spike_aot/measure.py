@@ -43,10 +43,11 @@ sys.path.insert(0, str(ROOT))
 RESULTS = ROOT / 'bench' / 'results' / 'spike_aot.json'
 VARIANTS = ('o3', 'native', 'native-nofma')
 
-from fpc_gripper.model import engine, kernels  # noqa: E402
+from fpc_gripper.model import engine  # noqa: E402
 from fpc_gripper.model.design import ActuatorDesign  # noqa: E402
+from fpc_gripper.model.discretisations.ccm import CCMSolver  # noqa: E402
 from fpc_gripper.model.engine import NewtonOptions  # noqa: E402
-from fpc_gripper.model.solver import CCMSolver  # noqa: E402
+from fpc_gripper.model.kernels import ccm as kernels  # noqa: E402
 
 
 def machine():

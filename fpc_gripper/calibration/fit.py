@@ -7,14 +7,14 @@ import math
 import numpy as np
 from scipy.optimize import least_squares
 
-from .data import DataError, LoadingData, MarkerData, read_loading, read_markers, read_tensile
-from .data import TensileData
+from .data import (DataError, LoadingData, MarkerData, read_loading, read_markers, read_tensile,
+                   TensileData)
 from .parameters import FitParameters
 from ..model import engine
 from ..model.design import ActuatorDesign
-from ..model.materials import emc_stress
+from ..model.discretisations.ccm import AXES
 from ..model.pipeline import finger_model, ModelSettings
-from ..model.solver import AXES
+from ..model.section.materials import emc_stress
 
 __all__ = ['calibrate', 'pcc_model', 'CalibrationResult', 'CalibrationStatus', 'FIT_SEGMENTS',
            'DEFAULT_FIT', 'IDENTIFIABLE_RSE']

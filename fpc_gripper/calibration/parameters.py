@@ -2,8 +2,8 @@
 
 import numpy as np
 
-from ..model.materials import Material
-from ..model.section_law import SECTION_PARAMETERS
+from ..model.section.law import SECTION_PARAMETERS
+from ..model.section.materials import Material
 
 __all__ = ['FIT_NAMES', 'FitParameters', 'parse_fit']
 

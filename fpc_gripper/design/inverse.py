@@ -8,7 +8,7 @@ import numpy as np
 from scipy.optimize import brentq, differential_evolution, minimize
 
 from fpc_gripper.model import batch
-from fpc_gripper.model.kinematics import consistent_strain_map, from_scaled
+from fpc_gripper.model.discretisations.ccm_geometry import consistent_strain_map, from_scaled
 from fpc_gripper.model.pipeline import finger_model
 from .grid import base_design
 from .parametric import model_settings

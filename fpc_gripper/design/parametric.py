@@ -5,8 +5,8 @@ import math
 import numpy as np
 
 from fpc_gripper.model import batch
+from fpc_gripper.model.discretisations.ccm import SolverStatus
 from fpc_gripper.model.pipeline import DEFAULT_N_SEGMENTS, ModelSettings
-from fpc_gripper.model.solver import SolverStatus
 from .grid import base_design, DEFAULT_PRESSURES, design_grid
 from .runner import run_chunks, shows_progress
 

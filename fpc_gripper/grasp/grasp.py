@@ -7,8 +7,8 @@ import math
 import numpy as np
 
 from fpc_gripper.io.config import GripperConfig
-from fpc_gripper.model import contact_kernels as ck
 from fpc_gripper.model.contact import contact_path, ContactSettings, translated
+from fpc_gripper.model.kernels import contact as ck
 from fpc_gripper.model.pipeline import contact_model, ModelSettings
 from fpc_gripper.model.validation import real_number
 

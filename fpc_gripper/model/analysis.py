@@ -5,7 +5,7 @@ import functools
 
 import numpy as np
 
-from . import shape_kernels
+from .kernels import shapes as shape_kernels
 
 __all__ = ['CircleFit', 'CircleFitted', 'fit_circle', 'flexural_rigidity']
 

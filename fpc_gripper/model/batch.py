@@ -5,14 +5,16 @@ import functools
 import numba
 import numpy as np
 
-from . import engine, shape_kernels
+from . import engine
 from .analysis import flexural_rigidity
 from .compiled import over_cores
 from .design import ActuatorDesign
-from .pcc import PCCSolver
+from .discretisations.ccm import (AXES, CCMResult, CCMSolver, check_rigidity, rigidity_result,
+                                  SolverStatus)
+from .discretisations.pcc import PCCSolver
+from .kernels import shapes as shape_kernels
 from .pipeline import finger_model, model_label, ModelSettings, rung_label, solver_label
 from .selection import AdaptiveSolver
-from .solver import AXES, CCMResult, CCMSolver, check_rigidity, rigidity_result, SolverStatus
 from .validation import check_load
 
 __all__ = ['solve_grid', 'rigidity_grid', 'GridResult', 'RigidityGrid', 'check_pressures']

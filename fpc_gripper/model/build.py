@@ -44,7 +44,8 @@ def _outputs(result):
 
 def _engine_calls(solver, force):
     """Run the engine's Newton and sensitivity, and the discretisation's hooks, from Python."""
-    from fpc_gripper.model import engine, kernels
+    from fpc_gripper.model import engine
+    from fpc_gripper.model.kernels import ccm as kernels
     tip_loads = getattr(solver, 'tip_loads', None)
     loads = tip_loads(force) if tip_loads else solver._loads(force, ())
     for load in ([], loads):
@@ -121,7 +122,9 @@ def _adaptive():
 def _ladder():
     import numpy as np
     from fpc_gripper.model import ArcSolver, RodSolver
-    from fpc_gripper.model import engine, ladder, rod_kernels
+    from fpc_gripper.model import engine
+    from fpc_gripper.model.discretisations import rod
+    from fpc_gripper.model.kernels import rod as rod_kernels
     for solver in (ArcSolver(_design()), RodSolver(_design())):
         _outputs(solver.solve(pressure=1.0e5))
         _outputs(solver.solve(pressure=1.0e5, tip_force=(0.05, -0.05)))
@@ -132,7 +135,7 @@ def _ladder():
     state = engine.solve(solver, 1.0e5, [], solver._options).x
     _, kap, along, start = rod_kernels.sample_fields_kernel(
         state, solver._xq.size, *solver._sample_at[1:5], np.zeros(2))
-    local = ladder._PointwiseLocal(solver, kap, along, solver._sample_at[4], 1.0e5)
+    local = rod._PointwiseLocal(solver, kap, along, solver._sample_at[4], 1.0e5)
     local.energy(start, 1.0e5, [])
     local.derivatives(start, 1.0e5, [])
 

@@ -6,9 +6,9 @@ import math
 
 import numpy as np
 
-from . import contact_kernels as ck
 from . import engine
 from .engine import SolverStatus
+from .kernels import contact as ck
 from .validation import real_number, real_pair
 
 __all__ = ['Circle', 'HalfPlane', 'ConvexPolygon', 'Ellipse', 'ContactSettings',

@@ -8,7 +8,7 @@ import pathlib
 
 import numpy as np
 
-from .materials import check_emc_monotonic, default_emc_coefficients, Material
+from .section.materials import check_emc_monotonic, default_emc_coefficients, Material
 from .validation import ArgumentError, check_interval, DESIGN_BOUNDS, real_number
 from ..safe_yaml import brief
 

@@ -13,11 +13,12 @@ from scipy.interpolate import PchipInterpolator
 
 from . import engine
 from .design import ActuatorDesign
-from .ladder import ArcSolver, RodSolver
-from .pcc import PCCSolver
-from .section import uniform_edges
-from .section_law import station_layout
-from .solver import CCMSolver, check_pressure_model, SolverStatus
+from .discretisations.arc import ArcSolver
+from .discretisations.ccm import CCMSolver, check_pressure_model, SolverStatus
+from .discretisations.pcc import PCCSolver
+from .discretisations.rod import RodSolver
+from .section.law import station_layout
+from .section.segments import uniform_edges
 from .validation import check_load, real_number
 
 __all__ = ['Scene', 'ModelChoice', 'RUNGS', 'choose_model', 'load_error_model', 'make_solver',

@@ -20,7 +20,7 @@ from fpc_gripper.calibration.cli import main
 from fpc_gripper.calibration.fit import _Problem
 from fpc_gripper.io.config import load_gripper_config
 from fpc_gripper.model import ActuatorDesign
-from fpc_gripper.model.materials import DEFAULT_EMC_COEFFICIENTS, emc_stress
+from fpc_gripper.model.section.materials import DEFAULT_EMC_COEFFICIENTS, emc_stress
 
 BASE = ActuatorDesign.paper(prestrain=0.25)
 FIT = ('prestrain', 'cl_modulus', 'fl_modulus', 'pressure_work_factor')

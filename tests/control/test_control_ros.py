@@ -23,7 +23,7 @@ from std_msgs.msg import Float64
 from fpc_gripper.grasp import make_object
 from fpc_gripper.io.config import load_gripper_config
 from fpc_gripper.model.contact import solve_contact
-from fpc_gripper.model.pcc import PCCSolver
+from fpc_gripper.model.discretisations.pcc import PCCSolver
 from fpc_gripper.model.pipeline import contact_segments, ModelSettings
 from fpc_gripper.nodes.gripper_controller import GripperController
 from fpc_gripper.nodes.gripper_demo import VirtualObjectNode

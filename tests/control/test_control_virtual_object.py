@@ -7,7 +7,7 @@ from fpc_gripper.control.virtual_object import VirtualObject
 from fpc_gripper.grasp import make_object
 from fpc_gripper.io.config import load_gripper_config
 from fpc_gripper.model.contact import ContactSettings, solve_contact
-from fpc_gripper.model.pcc import PCCSolver
+from fpc_gripper.model.discretisations.pcc import PCCSolver
 from fpc_gripper.model.pipeline import contact_segments, ModelSettings
 
 CONFIG = load_gripper_config()

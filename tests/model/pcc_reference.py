@@ -5,7 +5,7 @@ import math
 import numpy as np
 from scipy.linalg import cho_solve_banded, cholesky_banded, eig_banded, LinAlgError, solve_banded
 
-from fpc_gripper.model.pcc import _Banded, PCCSolver
+from fpc_gripper.model.discretisations.pcc import _Banded, PCCSolver
 
 #: Taylor coefficients (-1)^k / (2k + 1)! of sin(h)/h in h^2, k = 0..9.
 _SINC = np.array([(-1.0) ** k / math.factorial(2 * k + 1) for k in range(10)])

@@ -4,8 +4,8 @@ import numpy as np
 from scipy.linalg import cho_factor, cho_solve, eigh
 
 from fpc_gripper.model import engine
+from fpc_gripper.model.discretisations.rod import _lagrange, _RodHessian, RodSolver
 from fpc_gripper.model.engine import linear_step, NewtonOptions
-from fpc_gripper.model.ladder import _lagrange, _RodHessian, RodSolver
 
 
 class _PointwiseLocal:

@@ -8,8 +8,8 @@ import pytest
 
 from fpc_gripper.model import ActuatorDesign, CCMSolver, engine
 from fpc_gripper.model.batch import rigidity_grid, solve_grid
+from fpc_gripper.model.discretisations.pcc import PCCSolver
 from fpc_gripper.model.engine import SolverStatus
-from fpc_gripper.model.pcc import PCCSolver
 from fpc_gripper.model.pipeline import finger_model, model_label, ModelSettings, rung_label
 
 #: A scene of a batch runs the single solve's arithmetic on the same model; only the

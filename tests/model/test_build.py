@@ -122,7 +122,7 @@ def test_an_edited_source_makes_the_build_stale_and_strict_mode_refuses(tmp_path
     # A copy whose kernels differ by a comment: the build no longer matches, and with
     # FPC_ENGINE_STRICT (as in this suite) the first solve refuses to compile, naming it.
     root = _copy_package(tmp_path)
-    kernel = root / 'fpc_gripper' / 'model' / 'kernels.py'
+    kernel = root / 'fpc_gripper' / 'model' / 'kernels' / 'ccm.py'
     kernel.write_text(kernel.read_text() + '# edited\n')
     home = tmp_path / 'home'
     home.mkdir()

@@ -7,9 +7,9 @@ import pytest
 
 from fpc_gripper.model import ActuatorDesign, engine, PCCSolver, SolverStatus
 from fpc_gripper.model import contact as C
-from fpc_gripper.model import contact_kernels as ck
+from fpc_gripper.model.kernels import contact as ck
 from fpc_gripper.model.pipeline import contact_model
-from fpc_gripper.model.section_law import station_layout
+from fpc_gripper.model.section.law import station_layout
 
 DESIGN = ActuatorDesign.paper(0.25)
 INNER = C.ContactSettings(faces=('inner',))

@@ -6,7 +6,7 @@ from scipy.optimize._numdiff import approx_derivative
 
 from fpc_gripper.model import ActuatorDesign, CCMSolver
 from fpc_gripper.model.analysis import fit_circle
-from fpc_gripper.model.energy import load_derivatives, segment_derivatives
+from fpc_gripper.model.kernels.ccm import load_derivatives, segment_derivatives
 
 
 def _assembled(solver, pressure, loads):

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from fpc_gripper.model import ActuatorDesign, fit_emc_polynomial, Material
-from fpc_gripper.model.materials import emc_stress
+from fpc_gripper.model.section.materials import emc_stress
 
 
 def test_paper_design_matches_tables():

@@ -8,9 +8,11 @@ import numba
 import numpy as np
 import pytest
 
-from fpc_gripper.model import ActuatorDesign, CCMSolver, compiled, engine, kernels, pcc_kernels
+from fpc_gripper.model import ActuatorDesign, CCMSolver, compiled, engine
+from fpc_gripper.model.discretisations.pcc import PCCSolver
 from fpc_gripper.model.engine import SolverStatus
-from fpc_gripper.model.pcc import PCCSolver
+from fpc_gripper.model.kernels import ccm as kernels
+from fpc_gripper.model.kernels import pcc as pcc_kernels
 
 #: Compiled against interpreted: the same loop over the same kernels. The Newton steps
 #: come out bitwise equal or nearly (seen <= 3e-14 on a failed continuation's last
@@ -358,7 +360,7 @@ def test_the_stamp_follows_content_not_mtimes(tmp_path):
     driver = copy_dir / 'build.py'
     driver.write_bytes(driver.read_bytes() + b'# edited\n')
     assert compiled.sources_stamp(copy_dir) == compiled.sources_stamp(MODEL)
-    kernel = copy_dir / 'pcc_kernels.py'
+    kernel = copy_dir / 'kernels' / 'pcc.py'
     kernel.write_bytes(kernel.read_bytes() + b'# edited\n')
     assert compiled.sources_stamp(copy_dir) != compiled.sources_stamp(MODEL)
 

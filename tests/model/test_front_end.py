@@ -5,7 +5,7 @@ import pytest
 
 from fpc_gripper.model import ActuatorDesign, AdaptiveSolver, ArcSolver, CCMSolver, RodSolver
 from fpc_gripper.model.batch import solve_grid
-from fpc_gripper.model.pcc import PCCSolver
+from fpc_gripper.model.discretisations.pcc import PCCSolver
 from fpc_gripper.model.pipeline import (contact_model, contact_segments, finger_model,
                                         MAX_RUNG_SEGMENTS, MAX_SEGMENTS,
                                         ModelSettings)

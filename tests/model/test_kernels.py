@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 from scipy.optimize._numdiff import approx_derivative
 
-from fpc_gripper.model import ActuatorDesign, CCMSolver, kernels
+from fpc_gripper.model import ActuatorDesign, CCMSolver
+from fpc_gripper.model.kernels import ccm as kernels
 from fpc_gripper.model.selection import aligned_edges
 
 #: Kernels against the originals: the same formulas in the same order leave round-off

@@ -5,11 +5,12 @@ import pytest
 from scipy.optimize._numdiff import approx_derivative
 from section_reference import quad_minimiser, quad_section
 
-from fpc_gripper.model import (ActuatorDesign, ArcSolver, CCMSolver, PRESSURE_MODELS,
-                               RodSolver, SolverStatus)
-from fpc_gripper.model.kinematics import consistent_from_strain, consistent_strain_map
-from fpc_gripper.model.section_law import (build_section_law, rib_coverage,
-                                           section_minimiser, station_layout)
+from fpc_gripper.model import (ActuatorDesign, ArcSolver, CCMSolver, PRESSURE_MODELS, RodSolver,
+                               SolverStatus)
+from fpc_gripper.model.discretisations.ccm_geometry import (consistent_from_strain,
+                                                            consistent_strain_map)
+from fpc_gripper.model.section.law import (build_section_law, rib_coverage, section_minimiser,
+                                           station_layout)
 from fpc_gripper.model.selection import aligned_edges
 
 

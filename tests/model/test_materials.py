@@ -5,7 +5,7 @@ import pathlib
 import numpy as np
 
 from fpc_gripper.model import ActuatorDesign, default_emc_coefficients, fit_emc_polynomial
-from fpc_gripper.model.materials import DEFAULT_EMC_COEFFICIENTS
+from fpc_gripper.model.section.materials import DEFAULT_EMC_COEFFICIENTS
 from fpc_gripper.safe_yaml import parse_yaml
 
 #: Planar-tension neo-Hookean reference of SPEC "Materials": mu = E1/4 with E1 = 1.5 MPa.

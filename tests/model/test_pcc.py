@@ -9,8 +9,8 @@ import pytest
 
 from fpc_gripper.model import (ActuatorDesign, ArcSolver, PCCResult, PCCSolver, RodSolver,
                                SolverStatus)
-from fpc_gripper.model.pcc import half_angle_sinc, pcc_edges
-from fpc_gripper.model.section_law import section_minimiser, station_layout
+from fpc_gripper.model.discretisations.pcc import half_angle_sinc, pcc_edges
+from fpc_gripper.model.section.law import section_minimiser, station_layout
 
 PRESTRAINS = (0.15, 0.25, 0.40)
 N_VALUES = (16, 32, 64, 128, 256)

@@ -5,8 +5,9 @@ import numpy as np
 from pcc_reference import half_angle_sinc as reference_sinc, random_state, ReferencePCCSolver
 import pytest
 
-from fpc_gripper.model import ActuatorDesign, pcc_kernels
-from fpc_gripper.model.pcc import half_angle_sinc, PCCSolver
+from fpc_gripper.model import ActuatorDesign
+from fpc_gripper.model.discretisations.pcc import half_angle_sinc, PCCSolver
+from fpc_gripper.model.kernels import pcc as pcc_kernels
 
 #: Kernels against the reference: the same formulas, in the same order but for dot
 #: products and einsum, leave round-off only (seen <= 1.9e-15), relative to the largest

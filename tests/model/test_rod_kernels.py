@@ -5,8 +5,9 @@ import numpy as np
 import pytest
 from rod_reference import ReferenceRodSolver
 
-from fpc_gripper.model import ActuatorDesign, rod_kernels, RodSolver
-from fpc_gripper.model.ladder import _INDEFINITE, _PointwiseLocal
+from fpc_gripper.model import ActuatorDesign, RodSolver
+from fpc_gripper.model.discretisations.rod import _INDEFINITE, _PointwiseLocal
+from fpc_gripper.model.kernels import rod as rod_kernels
 
 #: Kernels against the reference: the same formulas, summed in another order than
 #: einsum and np.add.at, leave round-off only (seen <= 4e-15), relative to the largest

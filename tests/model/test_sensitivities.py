@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from fpc_gripper.model import ActuatorDesign, engine, Material, PCCSolver
-from fpc_gripper.model.section_law import SECTION_PARAMETERS
+from fpc_gripper.model.section.law import SECTION_PARAMETERS
 
 DESIGN = ActuatorDesign.paper(prestrain=0.25)
 L = DESIGN.free_length

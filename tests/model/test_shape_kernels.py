@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 from scipy.optimize._numdiff import approx_derivative
 
-from fpc_gripper.model import ActuatorDesign, batch, CCMSolver, fit_circle, shape_kernels
+from fpc_gripper.model import ActuatorDesign, batch, CCMSolver, fit_circle
+from fpc_gripper.model.kernels import shapes as shape_kernels
 from fpc_gripper.model.pipeline import ModelSettings
 
 #: Both fits stop at the orthogonal-distance minimum; MINPACK stops a little earlier

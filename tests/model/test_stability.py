@@ -10,7 +10,7 @@ from scipy.optimize._numdiff import approx_derivative
 from fpc_gripper.model import (ActuatorDesign, AdaptiveSolver, CCMSolver, choose_model,
                                RodSolver, Scene, SolverStatus)
 from fpc_gripper.model.pipeline import finger_model, ModelSettings
-from fpc_gripper.model.section_law import station_layout
+from fpc_gripper.model.section.law import station_layout
 from fpc_gripper.model.selection import a_posteriori_error, load_error_model
 
 _GX, _GW = np.polynomial.legendre.leggauss(6)

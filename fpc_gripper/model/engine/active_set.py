@@ -9,7 +9,7 @@ from .bordered import (_columns, _constrained_newton, _constraint_derivatives, _
                        _positive_definite, _row_count, _rows, _times)
 from .interface import _point_positions, _step
 from .outcomes import _CONTINUATION_FAILED, _MAX_ITERATIONS, _SUCCESS, _UNSTABLE
-from .. import contact_kernels as ck
+from ..kernels import contact as ck
 
 
 # -- contact: active set, stability, cold solves by obstacle growth ---------------------------

@@ -7,7 +7,7 @@ import numpy as np
 
 from .interface import (_derivatives, _max_abs, _max_ratio, _node_jacobian, _point_derivatives,
                         _point_jacobian, _solve_linear, _step)
-from .. import contact_kernels as ck
+from ..kernels import contact as ck
 
 
 # -- constraints: the rows of a bordered Newton system -----------------------------------------

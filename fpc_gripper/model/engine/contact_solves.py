@@ -9,8 +9,7 @@ from .active_set import _contact, _GAP_TOL
 from .entries import _contact_entry
 from .outcomes import _STATUS, SolverStatus
 from .solves import _compiled, _flat, _own, _packed, solve
-from .. import contact_kernels as ck
-from .. import kernels
+from ..kernels import ccm as kernels, contact as ck
 
 
 # -- contact ---------------------------------------------------------------------------------

@@ -4,7 +4,7 @@ from numba import types
 from numba.extending import overload
 import numpy as np
 
-from .. import kernels
+from ..kernels import ccm as kernels
 
 
 def linear_step(grad, hess, floor=kernels.EIGEN_FLOOR):

@@ -7,7 +7,7 @@ from .entries import _newton_entry, _rigidity_entry, _solve_entry
 from .interface import _derivatives, _node_jacobian, _solve_linear
 from .newton import _newton, _solve
 from .outcomes import _STATUS, BorderedOutcome, NewtonOutcome
-from .. import kernels
+from ..kernels import ccm as kernels
 
 
 # -- the engine's Python entry points -------------------------------------------------------

@@ -5,7 +5,7 @@ import math
 
 import numpy as np
 
-from .compiled import jit
+from ..compiled import jit
 
 __all__ = ['section_arrays', 'half_angle_sinc_kernel', 'energy_kernel', 'derivatives_kernel',
            'banded_cholesky', 'cholesky_solve', 'newton_step_kernel', 'nodes_kernel',

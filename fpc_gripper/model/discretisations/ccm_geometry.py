@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from . import kernels, shape_kernels
+from ..kernels import ccm as kernels, shapes as shape_kernels
 
 __all__ = ['to_scaled', 'from_scaled', 'end_rotation', 'node_positions', 'midplane_samples',
            'material_positions', 'consistent_strain_map', 'consistent_from_strain']

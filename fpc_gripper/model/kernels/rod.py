@@ -4,8 +4,8 @@ import math
 
 import numpy as np
 
-from .compiled import jit
-from .pcc_kernels import _section_energy, _section_slopes, banded_cholesky, cholesky_solve
+from .pcc import _section_energy, _section_slopes, banded_cholesky, cholesky_solve
+from ..compiled import jit
 
 __all__ = ['energy_kernel', 'derivatives_kernel', 'newton_step_kernel', 'condense_kernel',
            'reduced_rhs_kernel', 'expand_kernel', 'condensed_solve_kernel',

@@ -5,16 +5,16 @@ import math
 
 import numpy as np
 
-from . import engine, kernels
-from .analysis import CircleFitted, flexural_rigidity
-from .design import ActuatorDesign
-from .energy import node_jacobian
-from .engine import linear_solve, linear_step, NewtonOptions, SolverStatus
-from .kinematics import (from_scaled, material_positions, midplane_samples, node_positions,
-                         to_scaled)
-from .section import build_segments, uniform_edges
-from .validation import (arc_lengths, check_force, check_load, real_number,
-                         warm_start_allowed)
+from .ccm_geometry import (from_scaled, material_positions, midplane_samples, node_positions,
+                           to_scaled)
+from .. import engine
+from ..analysis import CircleFitted, flexural_rigidity
+from ..design import ActuatorDesign
+from ..engine import linear_solve, linear_step, NewtonOptions, SolverStatus
+from ..kernels import ccm as kernels
+from ..kernels.ccm import node_jacobian
+from ..section.segments import build_segments, uniform_edges
+from ..validation import arc_lengths, check_force, check_load, real_number, warm_start_allowed
 
 __all__ = ['CCMSolver', 'CCMResult', 'RigidityResult', 'SolverStatus', 'PRESSURE_MODELS',
            'PRESSURE_MODEL_NAMES', 'AXES', 'check_rigidity', 'rigidity_result',

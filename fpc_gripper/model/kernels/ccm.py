@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from .compiled import jit
+from ..compiled import jit
 
 __all__ = ['segment_energy', 'segment_derivatives', 'load_energy', 'load_derivatives',
            'node_jacobian', 'load_arrays', 'consistent_strain_map', 'node_positions',

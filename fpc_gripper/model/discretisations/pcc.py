@@ -2,11 +2,11 @@
 
 import numpy as np
 
-from . import pcc_kernels as kernels
-from .engine import NewtonOptions
-from .ladder import _check_common, _LadderSolver, _set_common, LadderResult
-from .section import share_segments
-from .section_law import station_layout
+from .rung import check_common, LadderResult, RungSolver, set_common
+from ..engine import NewtonOptions
+from ..kernels import pcc as kernels
+from ..section.law import station_layout
+from ..section.segments import share_segments
 
 __all__ = ['PCCSolver', 'PCCResult', 'pcc_edges', 'half_angle_sinc']
 
@@ -135,7 +135,7 @@ class _Banded:
         return kernels._dense_from_band(self.lower)
 
 
-class PCCSolver(_LadderSolver):
+class PCCSolver(RungSolver):
     """
     Piecewise-constant-strain rod: N segments, each an exact arc of uniform strain.
 
@@ -197,11 +197,11 @@ class PCCSolver(_LadderSolver):
 
     def __init__(self, design, n_segments=64, pressure_model=None, tol=1e-12,
                  samples=129, max_iterations=60):
-        _check_common(design, pressure_model, samples)
+        check_common(design, pressure_model, samples)
         if isinstance(n_segments, bool) or not isinstance(n_segments, (int, np.integer)) \
                 or n_segments < 1:
             raise ValueError(f'`n_segments` must be an integer >= 1, got {n_segments!r}')
-        _set_common(self, design, pressure_model, tol, samples, max_iterations)
+        set_common(self, design, pressure_model, tol, samples, max_iterations)
         self.edges, self.segment_types, self.law = pcc_edges(design, n_segments)
         self.lengths = np.diff(self.edges)
         self.n_segments = self.lengths.size

@@ -4,8 +4,8 @@ import math
 
 import numpy as np
 
-from . import arc_kernels, kernels, pcc_kernels
-from .compiled import jit
+from . import arc as arc_kernels, ccm as kernels, pcc as pcc_kernels
+from ..compiled import jit
 
 __all__ = ['signed_distances', 'distance_jacobian', 'circle_fit', 'ccm_samples',
            'ccm_circles', 'pcc_circles']

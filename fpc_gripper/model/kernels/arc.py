@@ -5,8 +5,8 @@ import math
 
 import numpy as np
 
-from .compiled import jit
-from .pcc_kernels import _section_energy, _section_slopes
+from .pcc import _section_energy, _section_slopes
+from ..compiled import jit
 
 __all__ = ['ArcData', 'arc_integrals', 'arc_derivatives', 'arc_energy', 'arc_step',
            'arc_solve_linear', 'arc_node_jacobian']

@@ -5,7 +5,7 @@ import math
 from numba.extending import register_jitable
 import numpy as np
 
-from .compiled import jit
+from ..compiled import jit
 
 __all__ = ['HALF_PLANE', 'CIRCLE', 'POLYGON', 'ELLIPSE', 'KIND_NAMES', 'signed_distance',
            'closest_point', 'FREE', 'NORMAL', 'STICK', 'SLIP_POS', 'SLIP_NEG', 'STATUS_NAMES',

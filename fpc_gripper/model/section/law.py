@@ -4,9 +4,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import engine
-from .engine import NewtonOptions, SolverStatus
 from .materials import emc_energy_density, emc_stress, emc_stress_derivative, Material
+from .. import engine
+from ..engine import NewtonOptions, SolverStatus
 
 __all__ = ['SectionLaw', 'build_section_law', 'rib_coverage', 'station_layout',
            'section_minimiser', 'SECTION_PARAMETERS', 'MODULUS_LAMINAE']

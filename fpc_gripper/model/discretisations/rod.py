@@ -1,385 +1,19 @@
-"""Model ladder beyond the CCM: a uniform arc (rung a) and a geometrically exact rod (rung d)."""
+"""Rung d: the geometrically exact, extensible rod, the ladder's reference."""
 
-import functools
 import math
 
 import numpy as np
 from scipy.linalg import eigh, lu_factor, lu_solve
 
-from . import arc_kernels, engine, rod_kernels
-from .analysis import CircleFitted
-from .design import ActuatorDesign
-from .engine import linear_solve, linear_step, NewtonOptions, SolverStatus
-from .kernels import load_arrays
-from .pcc_kernels import half_angle_sinc_kernel, section_arrays
-from .section_law import station_layout
-from .solver import (AXES, check_pressure_model, check_rigidity, pressure_work_factor,
-                     ResultPositions, rigidity_result)
-from .validation import check_load, real_number, warm_start_allowed
+from .rung import check_common, RodResult, RungSolver, set_common
+from .. import engine
+from ..engine import linear_step, NewtonOptions
+from ..kernels import rod as rod_kernels
+from ..kernels.pcc import section_arrays
+from ..section.law import station_layout
+from ..validation import real_number
 
-__all__ = ['ArcSolver', 'RodSolver', 'LadderResult', 'RodResult', 'ArcResult']
-
-_MESSAGES = {
-    SolverStatus.SUCCESS: 'converged: last Newton step {step:.1e} <= {tol:.0e}',
-    SolverStatus.MAX_ITERATIONS: 'not converged after {iterations} Newton iterations '
-                                 '(last step {step:.1e})',
-    SolverStatus.LINE_SEARCH_FAILED: 'line search found no decrease (last step {step:.1e}); '
-                                     'the equilibrium may not exist nearby',
-    SolverStatus.NOT_FINITE: 'energy or gradient became non-finite',
-    SolverStatus.UNSTABLE: 'converged to an unstable equilibrium (Hessian not positive '
-                           'definite)',
-    SolverStatus.CONTINUATION_FAILED: 'continuation in pressure and load stalled at '
-                                      '{fraction:.1%} of the requested loading',
-}
-#: Gauss rule on [0, 1] for the arc integrals int_0^1 (cos, sin)(phi t) t^k dt; exact to
-#: round-off for |phi| up to about 40 rad (several full turns).
-_ARC_X, _ARC_WX = np.polynomial.legendre.leggauss(48)
-_ARC_T, _ARC_W = 0.5 * (_ARC_X + 1.0), 0.5 * _ARC_WX
-
-
-class LadderResult(ResultPositions, CircleFitted):
-    """
-    Equilibrium of one finger from a ladder rung, with the fields of `CCMResult`.
-
-    Attributes
-    ----------
-    success : bool
-        True only for a converged, stable equilibrium.
-    status : SolverStatus
-    message : str
-    iterations : int
-        Newton iterations, continuation steps included.
-    coefficients : ndarray, shape (N, 4) or None
-        Arc: the CCM coefficients (b1, b3, c1, d) of one segment with the same
-        uniform strain (b1 = eps, d = kappa/2, b3 = -2 d^2/3, SI). Rod: None
-        (it has no polynomial segments); see `strains`.
-    points : ndarray, shape (M, 2)
-        Global (X, Z) midplane samples at evenly spaced reference arc length,
-        the root first and the tip last [m].
-    tangent : ndarray, shape (M,)
-        Tangent angle theta of every sample from +X towards +Z [rad].
-    strains : ndarray, shape (M, 3)
-        (eps [-], kappa [1/m], c1 [-]) at every sample; kappa = d theta/d s per
-        reference length, the deformed curvature is kappa / (1 + eps).
-    tip : ndarray, shape (2,)
-        Global (X, Z) of the tip [m].
-    beta : ndarray, shape (N,)
-        Rotation of every element (arc: N = 1, the whole arc) [rad].
-    valid : bool
-        Always True: these rungs are geometrically exact and have no
-        small-rotation rule.
-    curvature, fit_rmsd : float
-        Signed curvature of the least-squares circle [1/m] and its RMSD [m].
-    pressure : float
-        Gauge pressure [Pa].
-    tip_force : tuple of float
-        (f0, p0) [N].
-    energy : float
-        Total potential [J].
-
-    """
-
-    def __init__(self, solver, state, status, iterations, step, pressure, tip_force,
-                 fraction=1.0):
-        self.solver = solver
-        self.state = state
-        self.status = SolverStatus(status)
-        self.success = self.status is SolverStatus.SUCCESS
-        self.iterations = int(iterations)
-        self.last_step = float(step)
-        self.pressure = float(pressure)
-        self.tip_force = (float(tip_force[0]), float(tip_force[1]))
-        self.valid = True
-        self._figures = (step, iterations, fraction)
-
-    @functools.cached_property
-    def message(self):
-        """What happened, with the figures behind `status`."""
-        step, iterations, fraction = self._figures
-        return _MESSAGES[self.status].format(step=step, tol=self.solver.tol,
-                                             iterations=iterations, fraction=fraction)
-
-    # The outputs are built on first use: a caller reading the tip pays for the samples only
-    # when it reads them.
-    @functools.cached_property
-    def _out(self):
-        return self.solver._outputs(self.state, self.pressure, np.array(self.tip_force))
-
-    points = property(lambda self: self._out['points'],
-                      doc='Global (X, Z) midplane samples, root first, tip last [m].')
-    tangent = property(lambda self: self._out['tangent'],
-                       doc='Tangent angle theta of every sample from +X towards +Z [rad].')
-    strains = property(lambda self: self._out['strains'],
-                       doc='(eps [-], kappa [1/m], c1 [-]) at every sample.')
-    tip = property(lambda self: self._out['tip'], doc='Global (X, Z) of the tip [m].')
-    beta = property(lambda self: self._out['beta'],
-                    doc='Rotation of every element [rad].')
-    coefficients = property(lambda self: self._out['coefficients'],
-                            doc='CCM coefficients (b1, b3, c1, d) of every segment, or None.')
-    nodes = property(lambda self: self._out['nodes'], doc='Segment ends [m].')
-    energy = property(lambda self: self._out['energy'], doc='Total potential [J].')
-
-    def __repr__(self):
-        return (f'{type(self).__name__}(success={self.success}, status={self.status.name}, '
-                f'iterations={self.iterations}, tip={self.tip.round(6).tolist()})')
-
-
-class ArcResult(LadderResult):
-    """Result of `ArcSolver`; `state` is (eps, kappa, c1)."""
-
-
-class RodResult(LadderResult):
-    """Result of `RodSolver`; `state` is (theta nodal values, (eps, c1) at quadrature points)."""
-
-
-def _check_common(design, pressure_model, samples):
-    if not isinstance(design, ActuatorDesign):
-        raise TypeError(f'`design` must be an ActuatorDesign, got {type(design).__name__}')
-    check_pressure_model(pressure_model)
-    if isinstance(samples, bool) or not isinstance(samples, (int, np.integer)) or samples < 3:
-        raise ValueError(f'`samples` must be an integer >= 3, got {samples!r}')
-
-
-def _set_common(solver, design, pressure_model, tol, samples, max_iterations):
-    """Check and store the settings every non-CCM rung has."""
-    _check_common(design, pressure_model, samples)
-    solver.design = design
-    solver.pressure_model = check_pressure_model(pressure_model)
-    solver.pressure_coefficient = pressure_work_factor(design, pressure_model)
-    solver.tol = float(tol)
-    solver.samples = int(samples)
-    solver.max_iterations = int(max_iterations)
-    solver.length = design.free_length
-
-
-class _LadderSolver:
-    """
-    Shared solve and rigidity of the non-CCM rungs: discretisations of the one engine.
-
-    A subclass provides `_pack`/`_unpack` between its state and the engine's flat
-    unknowns, `_flat_state`, `energy`, `derivatives`, `step`, `solve_linear`,
-    `node_jacobian`, `gradient_scale` and `_options`; the Newton loop, the warm-start
-    rule, continuation and displacement control are the engine's.
-    """
-
-    _result_type = LadderResult
-
-    @property
-    def tip_node(self):
-        """Index of the tip node, where these rungs take their load."""
-        return self.n_segments
-
-    def flat(self):
-        """Return the flat, unstrained state as engine unknowns."""
-        return self._pack(self._flat_state())
-
-    def unknowns(self, result):
-        """Return the engine unknowns of a result of this solver (for `engine` functions)."""
-        return self._pack(result.state)
-
-    def tip_loads(self, force):
-        """Return the engine loads of a tip force (F_X, F_Z) [N]: none when it is zero."""
-        force = np.asarray(force, dtype=float)
-        return [(self.tip_node, force)] if force.any() else []
-
-    def _force(self, loads):
-        """Total tip force (F_X, F_Z) [N] of engine loads (these rungs load the tip only)."""
-        force = np.zeros(2)
-        for node, value in loads:
-            if node != self.tip_node:
-                raise ValueError(f'{type(self).__name__} takes a load at the tip only, got '
-                                 f'one at node {node}')
-            force = force + np.asarray(value, dtype=float)
-        return force
-
-    def solve(self, pressure=0.0, tip_force=(0.0, 0.0), initial=None):
-        """
-        Find the equilibrium at a gauge pressure and tip load.
-
-        Parameters
-        ----------
-        pressure : float
-            Gauge pressure P >= 0 [Pa].
-        tip_force : (float, float)
-            (f0, p0), tip force along global X and Z [N].
-        initial : result of this solver, optional
-            Warm start: Newton starts there, and if that does not reach a stable
-            equilibrium the solve starts again from the flat, unstrained state as
-            with None. It changes the iteration count, never the answer; it is ignored
-            above `validation.UNIQUE_LOAD` of tip load.
-
-        Returns
-        -------
-        LadderResult
-            `success` False (with a message) when Newton and continuation both fail.
-
-        """
-        pressure, force = check_load(pressure, tip_force, self.design.max_pressure)
-        force = np.array(force)
-        if initial is not None and not (isinstance(initial, self._result_type)
-                                        and initial.solver._compatible(self)):
-            raise ValueError(f'`initial` must be None or a {self._result_type.__name__} of a '
-                             'solver with the same discretisation')
-        # Beyond UNIQUE_LOAD a warm start could pick another stable branch: start cold.
-        warm = initial is not None and warm_start_allowed(math.hypot(*force))
-        x0 = self._pack(initial.state) if warm else None
-        loads = self.tip_loads(force)
-        out = engine.solve(self, pressure, loads, self._options, x0)
-        return self._result(out.x, out.status, out.iterations, out.gradient, out.step,
-                            out.min_eig, out.fraction, pressure, loads, force)
-
-    def _result(self, x, status, iterations, gradient, step, min_eig, fraction, pressure, loads,
-                tip_force):
-        """Build the result of an engine solve (a single one or a batch's scene)."""
-        return self._result_type(self, self._unpack(x), status, iterations, step, pressure,
-                                 np.asarray(tip_force, dtype=float), fraction=fraction)
-
-    def rigidity(self, pressure=0.0, axis='x', displacement=0.010, initial=None):
-        """
-        Flexural rigidity at fixed pressure by displacement control, eq. (22).
-
-        The engine's bordered system finds the tip force along +X (or +Z) whose
-        equilibrium moves the tip by `displacement` along that axis.
-
-        Returns
-        -------
-        RigidityResult
-            K_x = f0 |Z_tip|^3 / (3 delta) or K_z = p0 |X_tip|^3 / (3 delta) [N m^2].
-
-        """
-        delta = check_rigidity(axis, displacement)
-        unloaded = self.solve(pressure, (0.0, 0.0), initial=initial)
-        if not unloaded.success:
-            return rigidity_result(self, axis, delta, pressure, unloaded)
-        out = engine.rigidity(self, self._pack(unloaded.state), pressure, self.tip_node,
-                              AXES[axis], delta, self._options)
-        return rigidity_result(self, axis, delta, pressure, unloaded, out)
-
-
-class ArcSolver(_LadderSolver):
-    """
-    Rung a: the finger as one arc of uniform strain (eps, kappa, c1).
-
-    Minimises L W_mean(eps, kappa, c1) - F . tip(eps, kappa) with W_mean the
-    length-weighted mean section law (channel with ribs, channel-free tip), and
-    tip = (1 + eps) L int_0^1 (cos, sin)(kappa L t) dt. Without a tip load and for
-    a uniform section this is exact: the rod's solution is an arc. With loads or
-    a non-uniform section it is the one-element constant-strain Ritz solution.
-
-    Parameters
-    ----------
-    design : ActuatorDesign
-        The finger.
-    pressure_model : {None, 'design', 'adiabatic', 'isobaric'}
-        k_p = 1/(gamma - 1) or 1 (SPEC "Pressure work"); None or 'design' (the
-        default): the design's `pressure_work_factor`.
-    tol : float
-        Largest final Newton step in (eps, kappa L, c1) [-].
-    samples : int
-        Midplane samples M, root to tip.
-    max_iterations : int
-        Newton iterations per (sub)solve.
-
-    References
-    ----------
-    docs/physics.md, sections 11.2 and 11.3.
-
-    """
-
-    _result_type = ArcResult
-    rung = 'arc'
-
-    def __init__(self, design, pressure_model=None, tol=1e-12, samples=129,
-                 max_iterations=60):
-        _set_common(self, design, pressure_model, tol, samples, max_iterations)
-        self.n_segments = 1
-        breaks, types, law = station_layout(design, ribs='average')
-        self.law = law.mean(np.bincount(types, np.diff(breaks), minlength=law.n_types))
-        self.length = design.free_length
-        self._scale = np.array([1.0, self.length, 1.0])
-        # Axial stiffness of the finger [J]: the scale of gradients in (eps, kappa L, c1).
-        self.gradient_scale = float(self.law.stiffness[:, 0, 0].max()) * self.length
-        self._options = NewtonOptions(max_iterations=self.max_iterations, xtol=self.tol,
-                                      max_step=0.5, flat_slope=1e-14, energy_scale=1e-6)
-        self._data = arc_kernels.ArcData(*section_arrays(self.law, np.zeros(1, dtype=int)),
-                                         float(self.pressure_coefficient), float(self.length),
-                                         self._scale, _ARC_T, _ARC_W)
-
-    def _compatible(self, other):
-        return isinstance(other, ArcSolver)
-
-    def _flat_state(self):
-        return np.zeros(3)
-
-    # -- the discretisation's side of the engine: unknowns (eps, kappa L, c1) ----------
-    def _pack(self, y):
-        return np.asarray(y, dtype=float) * self._scale
-
-    def _unpack(self, x):
-        return x / self._scale
-
-    def kernel_data(self, loaded):
-        """Return the compiled discretisation the engine runs (`arc_kernels.ArcData`)."""
-        return self._data
-
-    def derivatives(self, x, pressure, loads):
-        """Energy [J], gradient and Hessian in the scaled unknowns (eps, kappa L, c1)."""
-        return arc_kernels.arc_derivatives(self._data, np.ascontiguousarray(x, dtype=float),
-                                           float(pressure), *self._load_arrays(loads))
-
-    def energy(self, x, pressure, loads):
-        """Total potential [J] at scaled unknowns `x`."""
-        return self.derivatives(x, pressure, loads)[0]
-
-    def step(self, grad, hess):
-        """Newton step of the 3 x 3 system (eigenvalues mirrored where indefinite)."""
-        return arc_kernels.arc_step(self._data, np.ascontiguousarray(grad, dtype=float),
-                                    np.ascontiguousarray(hess, dtype=float))
-
-    solve_linear = staticmethod(linear_solve)
-
-    def node_jacobian(self, x, node):
-        """Tip position [m] and its derivatives in the scaled unknowns, (2, 3)."""
-        if node != self.tip_node:
-            raise ValueError(f'ArcSolver has nodes 0 and 1 (the tip), got {node}')
-        return arc_kernels.arc_node_jacobian(self._data, np.ascontiguousarray(x, dtype=float),
-                                             int(node))
-
-    def _load_arrays(self, loads):
-        force = self._force(loads)
-        return (np.array([self.tip_node], dtype=np.int64), force.reshape(1, 2)) \
-            if force.any() else load_arrays([])
-
-    def material_points(self, result, s):
-        """(X, Z) [m] of the material points at reference arc lengths s (K,): on the arc."""
-        eps, kappa = result.state[0], result.state[1]
-        turn = np.ascontiguousarray(kappa * s)
-        chord = (1.0 + eps) * s * half_angle_sinc_kernel(turn, 0)[0]
-        return np.stack([chord * np.cos(0.5 * turn), chord * np.sin(0.5 * turn)], axis=1)
-
-    def turning(self, y):
-        """Return the turning kappa L [rad] of the arc of state y = (eps, kappa, c1)."""
-        return y[1] * self.length
-
-    def _outputs(self, y, pressure, force):
-        length = self.length
-        s = np.linspace(0.0, length, self.samples)
-        # The position at s is s (1 + eps) I_0(kappa s): the arc integral with phi = kappa s.
-        arg = np.multiply.outer(y[1] * s, _ARC_T)
-        i0 = np.stack([np.cos(arg) @ _ARC_W, np.sin(arg) @ _ARC_W])
-        stretch = 1.0 + y[0]
-        points = (stretch * s * i0).T
-        tip = points[-1].copy()
-        d = 0.5 * y[1]
-        loads = [(self.tip_node, np.asarray(force, dtype=float))]
-        return {
-            'points': points, 'tangent': y[1] * s,
-            'strains': np.tile(y, (self.samples, 1)), 'tip': tip,
-            'beta': np.array([self.turning(y)]),
-            'coefficients': np.array([[y[0], -2.0 * d * d / 3.0, y[2], d]]),
-            'nodes': np.array([[0.0, 0.0], tip]),
-            'energy': float(self.energy(self._pack(y), pressure, loads)),
-        }
+__all__ = ['RodSolver']
 
 
 class _PointwiseLocal:
@@ -467,7 +101,7 @@ def _lagrange(nodes, points):
     return values, derivs
 
 
-class RodSolver(_LadderSolver):
+class RodSolver(RungSolver):
     """
     Rung d: geometrically exact, extensible, shear-rigid planar rod with the section law.
 
@@ -532,14 +166,14 @@ class RodSolver(_LadderSolver):
 
     def __init__(self, design, pressure_model=None, tol=1e-10, ribs='exact', degree=8,
                  max_element_length=0.010, samples=129, max_iterations=60):
-        _check_common(design, pressure_model, samples)
+        check_common(design, pressure_model, samples)
         if isinstance(degree, bool) or not isinstance(degree, (int, np.integer)) \
                 or degree < 2:
             raise ValueError(f'`degree` must be an integer >= 2, got {degree!r}')
         max_element_length = real_number('max_element_length', max_element_length, '[m]')
         if max_element_length <= 0.0:
             raise ValueError(f'`max_element_length` must be > 0 [m], got {max_element_length}')
-        _set_common(self, design, pressure_model, tol, samples, max_iterations)
+        set_common(self, design, pressure_model, tol, samples, max_iterations)
         self.ribs = ribs
         self.degree = int(degree)
         breaks, types, self.law = station_layout(design, ribs=ribs)

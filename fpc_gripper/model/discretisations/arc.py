@@ -1,0 +1,143 @@
+"""Rung a: the finger as one arc of uniform strain."""
+
+import numpy as np
+
+from .rung import ArcResult, RungSolver, set_common
+from ..engine import linear_solve, NewtonOptions
+from ..kernels import arc as arc_kernels
+from ..kernels.ccm import load_arrays
+from ..kernels.pcc import half_angle_sinc_kernel, section_arrays
+from ..section.law import station_layout
+
+__all__ = ['ArcSolver']
+
+#: Gauss rule on [0, 1] for the arc integrals int_0^1 (cos, sin)(phi t) t^k dt; exact to
+#: round-off for |phi| up to about 40 rad (several full turns).
+_ARC_X, _ARC_WX = np.polynomial.legendre.leggauss(48)
+_ARC_T, _ARC_W = 0.5 * (_ARC_X + 1.0), 0.5 * _ARC_WX
+
+
+class ArcSolver(RungSolver):
+    """
+    Rung a: the finger as one arc of uniform strain (eps, kappa, c1).
+
+    Minimises L W_mean(eps, kappa, c1) - F . tip(eps, kappa) with W_mean the
+    length-weighted mean section law (channel with ribs, channel-free tip), and
+    tip = (1 + eps) L int_0^1 (cos, sin)(kappa L t) dt. Without a tip load and for
+    a uniform section this is exact: the rod's solution is an arc. With loads or
+    a non-uniform section it is the one-element constant-strain Ritz solution.
+
+    Parameters
+    ----------
+    design : ActuatorDesign
+        The finger.
+    pressure_model : {None, 'design', 'adiabatic', 'isobaric'}
+        k_p = 1/(gamma - 1) or 1 (SPEC "Pressure work"); None or 'design' (the
+        default): the design's `pressure_work_factor`.
+    tol : float
+        Largest final Newton step in (eps, kappa L, c1) [-].
+    samples : int
+        Midplane samples M, root to tip.
+    max_iterations : int
+        Newton iterations per (sub)solve.
+
+    References
+    ----------
+    docs/physics.md, sections 11.2 and 11.3.
+
+    """
+
+    _result_type = ArcResult
+    rung = 'arc'
+
+    def __init__(self, design, pressure_model=None, tol=1e-12, samples=129,
+                 max_iterations=60):
+        set_common(self, design, pressure_model, tol, samples, max_iterations)
+        self.n_segments = 1
+        breaks, types, law = station_layout(design, ribs='average')
+        self.law = law.mean(np.bincount(types, np.diff(breaks), minlength=law.n_types))
+        self.length = design.free_length
+        self._scale = np.array([1.0, self.length, 1.0])
+        # Axial stiffness of the finger [J]: the scale of gradients in (eps, kappa L, c1).
+        self.gradient_scale = float(self.law.stiffness[:, 0, 0].max()) * self.length
+        self._options = NewtonOptions(max_iterations=self.max_iterations, xtol=self.tol,
+                                      max_step=0.5, flat_slope=1e-14, energy_scale=1e-6)
+        self._data = arc_kernels.ArcData(*section_arrays(self.law, np.zeros(1, dtype=int)),
+                                         float(self.pressure_coefficient), float(self.length),
+                                         self._scale, _ARC_T, _ARC_W)
+
+    def _compatible(self, other):
+        return isinstance(other, ArcSolver)
+
+    def _flat_state(self):
+        return np.zeros(3)
+
+    # -- the discretisation's side of the engine: unknowns (eps, kappa L, c1) ----------
+    def _pack(self, y):
+        return np.asarray(y, dtype=float) * self._scale
+
+    def _unpack(self, x):
+        return x / self._scale
+
+    def kernel_data(self, loaded):
+        """Return the compiled discretisation the engine runs (`arc_kernels.ArcData`)."""
+        return self._data
+
+    def derivatives(self, x, pressure, loads):
+        """Energy [J], gradient and Hessian in the scaled unknowns (eps, kappa L, c1)."""
+        return arc_kernels.arc_derivatives(self._data, np.ascontiguousarray(x, dtype=float),
+                                           float(pressure), *self._load_arrays(loads))
+
+    def energy(self, x, pressure, loads):
+        """Total potential [J] at scaled unknowns `x`."""
+        return self.derivatives(x, pressure, loads)[0]
+
+    def step(self, grad, hess):
+        """Newton step of the 3 x 3 system (eigenvalues mirrored where indefinite)."""
+        return arc_kernels.arc_step(self._data, np.ascontiguousarray(grad, dtype=float),
+                                    np.ascontiguousarray(hess, dtype=float))
+
+    solve_linear = staticmethod(linear_solve)
+
+    def node_jacobian(self, x, node):
+        """Tip position [m] and its derivatives in the scaled unknowns, (2, 3)."""
+        if node != self.tip_node:
+            raise ValueError(f'ArcSolver has nodes 0 and 1 (the tip), got {node}')
+        return arc_kernels.arc_node_jacobian(self._data, np.ascontiguousarray(x, dtype=float),
+                                             int(node))
+
+    def _load_arrays(self, loads):
+        force = self._force(loads)
+        return (np.array([self.tip_node], dtype=np.int64), force.reshape(1, 2)) \
+            if force.any() else load_arrays([])
+
+    def material_points(self, result, s):
+        """(X, Z) [m] of the material points at reference arc lengths s (K,): on the arc."""
+        eps, kappa = result.state[0], result.state[1]
+        turn = np.ascontiguousarray(kappa * s)
+        chord = (1.0 + eps) * s * half_angle_sinc_kernel(turn, 0)[0]
+        return np.stack([chord * np.cos(0.5 * turn), chord * np.sin(0.5 * turn)], axis=1)
+
+    def turning(self, y):
+        """Return the turning kappa L [rad] of the arc of state y = (eps, kappa, c1)."""
+        return y[1] * self.length
+
+    def _outputs(self, y, pressure, force):
+        length = self.length
+        s = np.linspace(0.0, length, self.samples)
+        # The position at s is s (1 + eps) I_0(kappa s): the arc integral with phi = kappa s.
+        arg = np.multiply.outer(y[1] * s, _ARC_T)
+        i0 = np.stack([np.cos(arg) @ _ARC_W, np.sin(arg) @ _ARC_W])
+        stretch = 1.0 + y[0]
+        points = (stretch * s * i0).T
+        tip = points[-1].copy()
+        d = 0.5 * y[1]
+        loads = [(self.tip_node, np.asarray(force, dtype=float))]
+        return {
+            'points': points, 'tangent': y[1] * s,
+            'strains': np.tile(y, (self.samples, 1)), 'tip': tip,
+            'beta': np.array([self.turning(y)]),
+            'coefficients': np.array([[y[0], -2.0 * d * d / 3.0, y[2], d]]),
+            'nodes': np.array([[0.0, 0.0], tip]),
+            'energy': float(self.energy(self._pack(y), pressure, loads)),
+        }
