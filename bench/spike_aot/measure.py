@@ -7,7 +7,7 @@ Measure the Cython spike against numba on the unloaded CCM-8 solve; write the JS
 1. Builds every variant of bench/spike_aot/build.py cold (build dir removed first), in a
    subprocess each, timing the wall clock and reading the .so size.
 2. Warm time per solve, median over repeats of `solves` solves at pressures 0..300 kPa, of
-   (i) CCMSolver.solve (numba), (ii) engine.entries._solve_entry on the kernel data (numba),
+   (i) CCMSolver.solve (numba), (ii) engine.solves._solve_entry on the kernel data (numba),
    (iii) the Cython extension's solve_entry (each variant), (iv) ccm8_cy.py as plain
    Python (a few solves), (v) CCMSolver.solve with the engine entry swapped for the
    Cython one in this process (what the user would see). Ratios against (i), same run.
@@ -106,9 +106,9 @@ class Case:
 
     def numba(self, pressure, initial=None):
         warm = initial is not None
-        return engine.entries._solve_entry(self.data, initial if warm else self.flat, warm,
-                                           self.flat, float(pressure), self.nodes,
-                                           self.forces, self.opts, self.cap)
+        return engine.solves._solve_entry(self.data, initial if warm else self.flat, warm,
+                                          self.flat, float(pressure), self.nodes,
+                                          self.forces, self.opts, self.cap)
 
     def cython(self, module, problem, pressure, initial=None):
         warm = initial is not None

@@ -3,6 +3,7 @@
 from dataclasses import dataclass
 import functools
 import math
+import weakref
 
 import numpy as np
 
@@ -329,11 +330,18 @@ def finger_points(solver, settings=ContactSettings()):
         raise TypeError(f'`settings` must be a ContactSettings, got '
                         f'{type(settings).__name__}')
     _check_solver(solver)
-    # A function of the solver's edges and the settings: built once per solver.
-    memo = solver.__dict__.setdefault('_contact_points', {})
+    # A function of the solver's edges and the settings: built once per solver, and kept
+    # here rather than on the solver, which contact never writes into.
+    memo = _FINGER_POINTS.get(solver)
+    if memo is None:
+        memo = _FINGER_POINTS.setdefault(solver, {})
     if settings not in memo:
         memo[settings] = _finger_points(solver, settings)
     return memo[settings]
+
+
+#: The face points of each solver and contact settings (weak keys: they go with the solver).
+_FINGER_POINTS = weakref.WeakKeyDictionary()
 
 
 def _check_solver(solver):

@@ -7,8 +7,8 @@ import math
 import numpy as np
 
 from .design import ActuatorDesign
-from .discretisations.ccm import check_pressure_model
 from .selection import AdaptiveSolver, make_solver, RUNGS
+from .validation import check_pressure_model
 
 __all__ = ['DEFAULT_TOLERANCE', 'DEFAULT_N_SEGMENTS', 'MAX_SEGMENTS', 'MAX_RUNG_SEGMENTS',
            'ModelSettings', 'finger_model', 'contact_model', 'contact_segments', 'model_label',

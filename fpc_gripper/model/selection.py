@@ -14,12 +14,12 @@ from scipy.interpolate import PchipInterpolator
 from . import engine
 from .design import ActuatorDesign
 from .discretisations.arc import ArcSolver
-from .discretisations.ccm import CCMSolver, check_pressure_model, SolverStatus
+from .discretisations.ccm import CCMSolver, SolverStatus
 from .discretisations.pcc import PCCSolver
 from .discretisations.rod import RodSolver
 from .section.law import station_layout
 from .section.segments import uniform_edges
-from .validation import check_load, real_number
+from .validation import check_load, check_pressure_model, real_number
 
 __all__ = ['Scene', 'ModelChoice', 'RUNGS', 'choose_model', 'load_error_model', 'make_solver',
            'scene_turning', 'a_posteriori_error', 'aligned_edges', 'AdaptiveSolver']

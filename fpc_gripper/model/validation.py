@@ -9,7 +9,32 @@ from ..safe_yaml import brief
 
 __all__ = ['ArgumentError', 'arc_lengths', 'DESIGN_BOUNDS', 'DesignBounds', 'ENVELOPE',
            'InputLimits', 'UNIQUE_LOAD', 'check_force', 'check_interval', 'check_load',
-           'real_number', 'real_pair', 'warm_start_allowed']
+           'real_number', 'real_pair', 'warm_start_allowed', 'check_pressure_model',
+           'PRESSURE_MODELS', 'PRESSURE_MODEL_NAMES']
+
+#: Pressure-work coefficient k_p of Pi_P = -k_p P V by name (SPEC "Pressure work"):
+#: 1/(gamma - 1) with gamma = 1.4, exactly 2.5 (1/(1.4 - 1) rounds to 2.5000000000000004).
+PRESSURE_MODELS = {'adiabatic': 2.5, 'isobaric': 1.0}
+#: Every `pressure_model` a solver takes: 'design' (the design's `pressure_work_factor`,
+#: also spelt None) or a name of `PRESSURE_MODELS`.
+PRESSURE_MODEL_NAMES = ('design',) + tuple(PRESSURE_MODELS)
+
+
+def check_pressure_model(pressure_model):
+    """
+    Return the name of a pressure model, 'design' for None; raise naming the argument.
+
+    Parameters
+    ----------
+    pressure_model : {None, 'design', 'adiabatic', 'isobaric'}
+        None and 'design' use the design's `pressure_work_factor`; the names fix k_p.
+
+    """
+    name = 'design' if pressure_model is None else pressure_model
+    if not isinstance(name, str) or name not in PRESSURE_MODEL_NAMES:
+        raise ValueError(f'`pressure_model` must be one of {list(PRESSURE_MODEL_NAMES)}, '
+                         f'got {pressure_model!r}')
+    return name
 
 
 class ArgumentError(ValueError):

@@ -1,6 +1,7 @@
 """The engine's one loop, compiled and interpreted: same answers, real kernels, honest cache."""
 
 import copy
+import importlib
 import pathlib
 
 from helpers import deviation, fd_derivative
@@ -239,7 +240,9 @@ def test_every_hook_is_a_compiled_kernel(kind):
         assert deviation(point, positions[1]) <= RTOL
         assert deviation(jac, solver.point_jacobian(x, seg[1], off[1], z[1])[1]) <= RTOL
         got = hooks['point_derivatives'](data, x, pressure, nodes, forces, seg, off, z, push)
-        loads = engine.interface._loads(nodes, forces)
+        # The module, not `engine.newton` (the function of that name).
+        hooks_module = importlib.import_module('fpc_gripper.model.engine.newton')
+        loads = hooks_module._loads(nodes, forces)
         want = solver.point_derivatives(x, pressure, loads, seg, off, z, push)
         assert got[0] == pytest.approx(want[0], rel=1e-12)
         assert deviation(got[1], want[1]) <= RTOL
@@ -249,7 +252,7 @@ def test_every_hook_is_a_compiled_kernel(kind):
     # The engine's entries compiled for this namedtuple type.
     engine.solve(solver, 50e3, _loads(solver, (0.1, 0.0) if loaded else (0.0, 0.0)),
                  solver._options)
-    signatures = engine.entries._solve_entry.signatures
+    signatures = engine.solves._solve_entry.signatures
     types = {getattr(sig[0], 'instance_class', None) for sig in signatures}
     assert type(data) in types
 
@@ -341,7 +344,7 @@ ENTRIES = ('_newton_entry', '_solve_entry', '_rigidity_entry', '_contact_entry',
 @pytest.mark.parametrize('entry', ENTRIES)
 def test_cache_stamp_covers_every_model_source(entry):
     # Each entry inlines kernels of other modules: its stamp is the whole model's content.
-    dispatcher = getattr(engine.entries, entry)
+    dispatcher = getattr(engine.solves, entry)
     assert dispatcher._cache._cache_file._source_stamp == compiled.sources_stamp(MODEL)
     assert isinstance(dispatcher._cache, compiled._Cache)
 
@@ -370,7 +373,7 @@ def test_cache_index_goes_stale_when_a_kernel_source_changes():
     # entries load, and an index read under another stamp (an edited source) is empty.
     solver = CCMSolver(ActuatorDesign.paper(0.25), 8)
     engine.solve(solver, 10e3, [], solver._options)
-    cache_file = engine.entries._solve_entry._cache._cache_file
+    cache_file = engine.solves._solve_entry._cache._cache_file
     assert cache_file._load_index()                       # built: entries found
     stale = copy.copy(cache_file)
     stale._source_stamp = compiled.sources_stamp(MODEL) + '-edited'

@@ -91,3 +91,34 @@ def test_a_grid_of_the_rod_is_the_rods_own_solves(design):
             assert grid.success[0, k, j]
             assert np.max(np.abs(grid.tip[0, k, j] - rod.solve(p, f).tip)) <= 1e-12
             assert grid.models[0, k, j] == 'rod'
+
+
+def _state(solver):
+    """A solver's attributes, by name and identity (a new or rebound one shows)."""
+    return {name: id(value) for name, value in vars(solver).items()}
+
+
+@pytest.mark.parametrize('build', [
+    lambda d: CCMSolver(d, n_segments=8), lambda d: PCCSolver(d, n_segments=16),
+    lambda d: ArcSolver(d), lambda d: RodSolver(d)])
+def test_the_engine_never_writes_into_a_solver(design, build):
+    solver = build(design)
+    before = _state(solver)
+    first = solver.solve(50e3, (0.05, 0.0))
+    solver.solve(60e3, (0.05, 0.0), initial=first)
+    assert solver.rigidity(50e3).success
+    assert _state(solver) == before
+
+
+def test_nothing_writes_into_the_contact_model_or_the_grid_models(design):
+    from fpc_gripper.model import contact as C
+    model = contact_model(design)
+    before = _state(model)
+    result = C.solve_contact(model, 100e3, C.Circle((0.05, -0.05), 0.02))
+    assert result.success, result.message
+    assert _state(model) == before
+    adaptive = finger_model(design, ModelSettings())
+    solvers = [adaptive.solver_for(*key) for key in list(adaptive._solvers)]
+    states = [_state(s) for s in solvers]
+    assert solve_grid([design], [0.0, 50e3, 150e3], [(0.0, 0.0), (0.1, 0.0)]).success.all()
+    assert [_state(s) for s in solvers] == states

@@ -14,18 +14,13 @@ from ..engine import linear_solve, linear_step, NewtonOptions, SolverStatus
 from ..kernels import ccm as kernels
 from ..kernels.ccm import node_jacobian
 from ..section.segments import build_segments, uniform_edges
-from ..validation import arc_lengths, check_force, check_load, real_number, warm_start_allowed
+from ..validation import (arc_lengths, check_force, check_load, check_pressure_model,
+                          PRESSURE_MODEL_NAMES, PRESSURE_MODELS, real_number, warm_start_allowed)
 
 __all__ = ['CCMSolver', 'CCMResult', 'RigidityResult', 'SolverStatus', 'PRESSURE_MODELS',
            'PRESSURE_MODEL_NAMES', 'AXES', 'check_rigidity', 'rigidity_result',
            'check_pressure_model', 'pressure_work_factor']
 
-#: Pressure-work coefficient k_p of Pi_P = -k_p P V by name (SPEC "Pressure work"):
-#: 1/(gamma - 1) with gamma = 1.4, exactly 2.5 (1/(1.4 - 1) rounds to 2.5000000000000004).
-PRESSURE_MODELS = {'adiabatic': 2.5, 'isobaric': 1.0}
-#: Every `pressure_model` a solver takes: 'design' (the design's `pressure_work_factor`,
-#: also spelt None) or a name of `PRESSURE_MODELS`.
-PRESSURE_MODEL_NAMES = ('design',) + tuple(PRESSURE_MODELS)
 #: Midplane reconstructions: the paper's, or one that converges to the rod as N grows
 #: (kinematics.consistent_strain_map).
 RECONSTRUCTIONS = ('paper', 'consistent')
@@ -47,23 +42,6 @@ _MESSAGES = {
     SolverStatus.CONTINUATION_FAILED: 'continuation in pressure and load stalled at '
                                       '{fraction:.1%} of the requested loading',
 }
-
-
-def check_pressure_model(pressure_model):
-    """
-    Return the name of a pressure model, 'design' for None; raise naming the argument.
-
-    Parameters
-    ----------
-    pressure_model : {None, 'design', 'adiabatic', 'isobaric'}
-        None and 'design' use the design's `pressure_work_factor`; the names fix k_p.
-
-    """
-    name = 'design' if pressure_model is None else pressure_model
-    if not isinstance(name, str) or name not in PRESSURE_MODEL_NAMES:
-        raise ValueError(f'`pressure_model` must be one of {list(PRESSURE_MODEL_NAMES)}, '
-                         f'got {pressure_model!r}')
-    return name
 
 
 def pressure_work_factor(design, pressure_model=None):

@@ -5,13 +5,12 @@ import math
 
 import numpy as np
 
-from .ccm import (AXES, check_pressure_model, check_rigidity, pressure_work_factor,
-                  ResultPositions, rigidity_result)
+from .ccm import AXES, check_rigidity, pressure_work_factor, ResultPositions, rigidity_result
 from .. import engine
 from ..analysis import CircleFitted
 from ..design import ActuatorDesign
 from ..engine import SolverStatus
-from ..validation import check_load, warm_start_allowed
+from ..validation import check_load, check_pressure_model, warm_start_allowed
 
 __all__ = ['LadderResult', 'ArcResult', 'RodResult', 'RungSolver', 'check_common',
            'set_common']

@@ -1,17 +1,16 @@
 """
 The one equilibrium engine: damped Newton, continuation, the bordered Newton of constraints.
 
-A discretisation hands the engine its hooks (`interface`); the loops are written once
-(`newton`, `bordered`, `active_set`) and run compiled through the entries (`entries`) or
-interpreted on a Python object; the Python front (`solves`, `contact_solves`, `batches`)
-packs the inputs, calls an entry and returns an outcome (`outcomes`).
+A discretisation hands the engine its hooks (the top of `newton`); the loops are written
+once (`newton`, `bordered`, `active_set`) and run compiled through the entries (the top of
+`solves`) or interpreted on a Python object; the Python front (`solves`, `contact_solves`,
+`batches`) packs the inputs, calls an entry and returns an outcome (`outcomes`).
 """
 
 from .batches import BatchOutcome, BatchRigidity, rigidity_batch, solve_batch
 from .bordered import ContactSet, NodeLine
-from .contact_solves import (contact_path, contact_solve, contact_step, ContactOutcome,
-                             next_anchors)
-from .interface import linear_solve, linear_step
+from .contact_solves import contact_path, contact_solve, contact_step, ContactOutcome, next_anchors
+from .newton import linear_solve, linear_step
 from .outcomes import BorderedOutcome, NewtonOptions, NewtonOutcome, SolverStatus
 from .solves import newton, rigidity, sensitivity, solve
 

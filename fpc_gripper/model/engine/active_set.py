@@ -7,7 +7,7 @@ import numpy as np
 
 from .bordered import (_columns, _constrained_newton, _constraint_derivatives, _dense_solve,
                        _positive_definite, _row_count, _rows, _times)
-from .interface import _point_positions, _step
+from .newton import _point_positions, _step
 from .outcomes import _CONTINUATION_FAILED, _MAX_ITERATIONS, _SUCCESS, _UNSTABLE
 from ..kernels import contact as ck
 

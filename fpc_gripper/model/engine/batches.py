@@ -5,8 +5,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from .entries import _rigidity_batch_entry, _solve_batch_entry
-from .solves import _compiled, _flat, _packed
+from .solves import _compiled, _flat, _packed, _rigidity_batch_entry, _solve_batch_entry
 from ..compiled import over_cores
 
 

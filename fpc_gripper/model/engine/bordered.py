@@ -5,8 +5,8 @@ import collections
 from numba.extending import overload, register_jitable
 import numpy as np
 
-from .interface import (_derivatives, _max_abs, _max_ratio, _node_jacobian, _point_derivatives,
-                        _point_jacobian, _solve_linear, _step)
+from .newton import (_derivatives, _max_abs, _max_ratio, _node_jacobian, _point_derivatives,
+                     _point_jacobian, _solve_linear, _step)
 from ..kernels import contact as ck
 
 

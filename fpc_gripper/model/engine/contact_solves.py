@@ -6,9 +6,8 @@ import typing
 import numpy as np
 
 from .active_set import _contact, _GAP_TOL
-from .entries import _contact_entry
 from .outcomes import _STATUS, SolverStatus
-from .solves import _compiled, _flat, _own, _packed, solve
+from .solves import _compiled, _contact_entry, _flat, _own, _packed, solve
 from ..kernels import ccm as kernels, contact as ck
 
 

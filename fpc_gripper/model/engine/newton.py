@@ -1,11 +1,215 @@
-"""The damped Newton and its continuation in pressure: each loop once, compiled or not."""
+"""The discretisation hooks and the damped Newton over them: each loop once, compiled or not."""
 
-from numba.extending import register_jitable
+from numba import types
+from numba.extending import overload, register_jitable
 import numpy as np
 
-from .interface import _derivatives, _dot, _energy, _max_abs, _max_ratio, _step
 from .outcomes import (_CONTINUATION_FAILED, _LINE_SEARCH_FAILED, _MAX_ITERATIONS, _NOT_FINITE,
                        _SUCCESS, _UNSTABLE)
+from ..kernels import ccm as kernels
+
+
+def linear_step(grad, hess, floor=kernels.EIGEN_FLOOR):
+    """
+    Newton step -H^-1 g, and the smallest eigenvalue's sign (1.0 when positive definite).
+
+    Where H is not positive definite its eigenvalues are mirrored (|lambda|, floored at
+    `floor` times the largest) so that the step still descends; the smallest eigenvalue
+    is returned. H is dense (n, n), or (N, m, m) blocks for g of shape (N, m). Compiled
+    (`kernels.newton_step`).
+    """
+    return kernels.newton_step(grad, hess, floor)
+
+
+def linear_solve(hess, rhs):
+    """Solve H x = rhs for a dense (n, n) or block (N, m, m) H; LinAlgError if singular."""
+    if hess.ndim == 3:
+        return np.linalg.solve(hess, rhs[:, :, None])[:, :, 0]
+    return np.linalg.solve(hess, rhs.ravel()).reshape(rhs.shape)
+
+
+# -- the discretisation interface ----------------------------------------------------------
+# A discretisation is either a Python object with methods (the loops then run interpreted)
+# or a namedtuple of arrays whose class carries `_kernels`, a dict of compiled functions of
+# the same names taking the namedtuple first (the loops then run compiled, for that
+# namedtuple type). These functions are that interface; the loops call nothing else. The
+# first five serve every solve; the three `_point_*` (face points: the PCC and the rod)
+# serve contact only.
+def _loads(nodes, forces):
+    return [(int(node), forces[k]) for k, node in enumerate(nodes)]
+
+
+def _derivatives(problem, x, pressure, nodes, forces):
+    """Energy [J], gradient (shape of x) and Hessian (opaque to the engine) at x."""
+    return problem.derivatives(x, pressure, _loads(nodes, forces))
+
+
+def _energy(problem, x, pressure, nodes, forces):
+    """Total potential [J] at x."""
+    return problem.energy(x, pressure, _loads(nodes, forces))
+
+
+def _step(problem, grad, hess):
+    """Newton step (shape of grad) and the smallest eigenvalue (1.0 when H is PD)."""
+    return problem.step(grad, hess)
+
+
+def _solve_linear(problem, hess, rhs):
+    """Solve H x = rhs: (x, True), or (anything, False) where H is singular."""
+    try:
+        return problem.solve_linear(hess, rhs), True
+    except np.linalg.LinAlgError:
+        return rhs, False
+
+
+def _node_jacobian(problem, x, node):
+    """Position (2,) of a node [m] and its derivatives, shape (2,) + x.shape."""
+    return problem.node_jacobian(x, node)
+
+
+def _point_derivatives(problem, x, pressure, nodes, forces, pseg, poff, pz, pforce):
+    """Return `_derivatives` with dead forces pforce (K, 2) at face points too."""
+    return problem.point_derivatives(x, pressure, _loads(nodes, forces), pseg, poff, pz,
+                                     pforce)
+
+
+def _point_positions(problem, x, pseg, poff, pz):
+    """Positions (K, 2) [m] of face points: segment, arc length into it [m], height [m]."""
+    return problem.point_positions(x, pseg, poff, pz)
+
+
+def _point_jacobian(problem, x, seg, offset, z):
+    """Position (2,) of a face point [m] and its derivatives, shape (2,) + x.shape."""
+    return problem.point_jacobian(x, seg, offset, z)
+
+
+def _kernel(problem, name):
+    """Return the compiled `name` of a namedtuple discretisation type, None for others."""
+    if isinstance(problem, types.BaseNamedTuple):
+        return getattr(problem.instance_class, '_kernels', {}).get(name)
+    return None
+
+
+@overload(_derivatives, jit_options={'nogil': True})
+def _derivatives_compiled(problem, x, pressure, nodes, forces):
+    kernel = _kernel(problem, 'derivatives')
+    if kernel is not None:
+        return lambda problem, x, pressure, nodes, forces: kernel(problem, x, pressure, nodes,
+                                                                  forces)
+    return None
+
+
+@overload(_energy, jit_options={'nogil': True})
+def _energy_compiled(problem, x, pressure, nodes, forces):
+    kernel = _kernel(problem, 'energy')
+    if kernel is not None:
+        return lambda problem, x, pressure, nodes, forces: kernel(problem, x, pressure, nodes,
+                                                                  forces)
+    return None
+
+
+@overload(_step, jit_options={'nogil': True})
+def _step_compiled(problem, grad, hess):
+    kernel = _kernel(problem, 'step')
+    if kernel is not None:
+        return lambda problem, grad, hess: kernel(problem, grad, hess)
+    return None
+
+
+@overload(_solve_linear, jit_options={'nogil': True})
+def _solve_linear_compiled(problem, hess, rhs):
+    kernel = _kernel(problem, 'solve_linear')
+    if kernel is not None:
+        return lambda problem, hess, rhs: kernel(problem, hess, rhs)
+    return None
+
+
+@overload(_node_jacobian, jit_options={'nogil': True})
+def _node_jacobian_compiled(problem, x, node):
+    kernel = _kernel(problem, 'node_jacobian')
+    if kernel is not None:
+        return lambda problem, x, node: kernel(problem, x, node)
+    return None
+
+
+@overload(_point_derivatives, jit_options={'nogil': True})
+def _point_derivatives_compiled(problem, x, pressure, nodes, forces, pseg, poff, pz, pforce):
+    kernel = _kernel(problem, 'point_derivatives')
+    if kernel is not None:
+        return lambda problem, x, pressure, nodes, forces, pseg, poff, pz, pforce: kernel(
+            problem, x, pressure, nodes, forces, pseg, poff, pz, pforce)
+    return None
+
+
+@overload(_point_positions, jit_options={'nogil': True})
+def _point_positions_compiled(problem, x, pseg, poff, pz):
+    kernel = _kernel(problem, 'point_positions')
+    if kernel is not None:
+        return lambda problem, x, pseg, poff, pz: kernel(problem, x, pseg, poff, pz)
+    return None
+
+
+@overload(_point_jacobian, jit_options={'nogil': True})
+def _point_jacobian_compiled(problem, x, seg, offset, z):
+    kernel = _kernel(problem, 'point_jacobian')
+    if kernel is not None:
+        return lambda problem, x, seg, offset, z: kernel(problem, x, seg, offset, z)
+    return None
+
+
+# Reductions of the loops: numpy when interpreted, allocation-free loops when compiled.
+def _max_abs(a):
+    """Return max |a|, 0 for an empty array."""
+    return float(np.abs(a).max()) if a.size else 0.0
+
+
+def _max_ratio(a, cap):
+    """Return max |a| / cap, cap elementwise of a's shape; 0 for an empty array."""
+    return float((np.abs(a) / cap).max()) if a.size else 0.0
+
+
+def _dot(a, b):
+    """Return the sum of a * b over all elements."""
+    return float(np.vdot(a, b))
+
+
+@overload(_max_abs, jit_options={'nogil': True})
+def _max_abs_compiled(a):
+    def impl(a):
+        out = 0.0
+        for value in a.flat:
+            if value != value:
+                # max() would drop a NaN: the loops test this figure for finiteness.
+                return np.nan
+            out = max(out, abs(value))
+        return out
+    return impl
+
+
+@overload(_max_ratio, jit_options={'nogil': True})
+def _max_ratio_compiled(a, cap):
+    def impl(a, cap):
+        out = 0.0
+        flat_cap = cap.ravel()
+        k = 0
+        for value in a.flat:
+            out = max(out, abs(value) / flat_cap[k])
+            k += 1
+        return out
+    return impl
+
+
+@overload(_dot, jit_options={'nogil': True})
+def _dot_compiled(a, b):
+    def impl(a, b):
+        out = 0.0
+        flat_b = b.ravel()
+        k = 0
+        for value in a.flat:
+            out += value * flat_b[k]
+            k += 1
+        return out
+    return impl
 
 
 # -- the loops: each written once, run compiled or interpreted -----------------------------

@@ -1,13 +1,109 @@
-"""The engine's Python front: Newton, solve, rigidity and sensitivity of one scene."""
+"""The engine's front: its compiled entries, and Newton, solve, rigidity and sensitivity."""
+
+import threading
+import weakref
 
 import numpy as np
 
+from .active_set import _contact
 from .bordered import _rigidity
-from .entries import _newton_entry, _rigidity_entry, _solve_entry
-from .interface import _derivatives, _node_jacobian, _solve_linear
-from .newton import _newton, _solve
-from .outcomes import _STATUS, BorderedOutcome, NewtonOutcome
+from .newton import _derivatives, _newton, _node_jacobian, _solve, _solve_linear
+from .outcomes import _STATUS, _SUCCESS, BorderedOutcome, NewtonOutcome
+from ..compiled import jit
 from ..kernels import ccm as kernels
+
+
+# -- the compiled entries: what Python calls, one per loop, and the batches -----------------
+@jit
+def _newton_entry(problem, x, pressure, nodes, forces, options, cap):
+    return _newton(problem, x, pressure, nodes, forces, options, cap)
+
+
+@jit
+def _solve_entry(problem, initial, warm, flat, pressure, nodes, forces, options, cap):
+    return _solve(problem, initial, warm, flat, pressure, nodes, forces, options, cap)
+
+
+@jit
+def _rigidity_entry(problem, x, pressure, node, direction, displacement, options, cap):
+    return _rigidity(problem, x, pressure, node, direction, displacement, options, cap)
+
+
+# numpy's error model (a division by zero gives inf or nan, which the loops test for) keeps
+# the many divisions of the contact code free of exception paths: it compiles in less time.
+@jit(error_model='numpy')
+def _contact_entry(problem, x, lam, status, depth, pressure, nodes, forces, con, options, cap,
+                   grow):
+    return _contact(problem, x, lam, status, depth, pressure, nodes, forces, con, options, cap,
+                    grow)
+
+
+@jit
+def _solve_batch_entry(problems, design, pressures, nodes, forces, initial, flat, options, cap,
+                       tip):
+    count = pressures.size
+    warm = initial.shape[0] > 0
+    states = np.empty((count,) + flat.shape)
+    status = np.empty(count, dtype=np.int64)
+    iterations = np.empty(count, dtype=np.int64)
+    figures = np.empty((count, 6))
+    for i in range(count):
+        problem = problems[design[i]]
+        start = initial[i] if warm else flat
+        x, code, its, grad, step, eig, fraction = _solve(
+            problem, start, warm, flat, pressures[i], nodes, forces[i], options, cap)
+        states[i] = x
+        status[i] = code
+        iterations[i] = its
+        position = _node_jacobian(problem, x, tip)[0]
+        figures[i, 0] = grad
+        figures[i, 1] = step
+        figures[i, 2] = eig
+        figures[i, 3] = fraction
+        figures[i, 4] = position[0]
+        figures[i, 5] = position[1]
+    return states, status, iterations, figures
+
+
+@jit
+def _rigidity_batch_entry(unloaded, loaded, design, pressures, node, direction, displacement,
+                          flat, options, cap):
+    count = pressures.size
+    free = np.empty((count,) + flat.shape)
+    states = np.empty((count,) + flat.shape)
+    status = np.empty(count, dtype=np.int64)
+    iterations = np.empty((count, 2), dtype=np.int64)
+    figures = np.empty((count, 10))
+    nodes = np.zeros(0, dtype=np.int64)
+    forces = np.zeros((0, 2))
+    for i in range(count):
+        d = design[i]
+        x, code, its, grad, step, eig, fraction = _solve(
+            unloaded[d], flat, False, flat, pressures[i], nodes, forces, options, cap)
+        free[i] = x
+        status[i] = code
+        iterations[i, 0] = its
+        figures[i, 0] = grad
+        figures[i, 1] = step
+        figures[i, 2] = eig
+        figures[i, 3] = fraction
+        figures[i, 4:] = np.nan
+        iterations[i, 1] = 0
+        states[i] = x
+        if code != _SUCCESS:
+            continue
+        y, force, ok, its, done, stable, gradient = _rigidity(
+            loaded[d], x, pressures[i], node, direction, displacement, options, cap)
+        position = _node_jacobian(loaded[d], y, node)[0]
+        states[i] = y
+        iterations[i, 1] = its
+        figures[i, 4] = force if ok else np.nan
+        figures[i, 5] = done
+        figures[i, 6] = 1.0 if stable else 0.0
+        figures[i, 7] = gradient
+        figures[i, 8] = position[0]
+        figures[i, 9] = position[1]
+    return free, status, states, iterations, figures
 
 
 # -- the engine's Python entry points -------------------------------------------------------
@@ -17,10 +113,25 @@ def _compiled(problem, loaded):
     return None if make is None else make(loaded)
 
 
+#: What the engine derives once per discretisation (its flat state, its packed options),
+#: kept here and not on the discretisation: the engine never writes into a solver. Weak
+#: keys, so a solver's entry goes with it.
+_DERIVED = weakref.WeakKeyDictionary()
+_DERIVED_LOCK = threading.Lock()
+
+
+def _derived(problem):
+    memo = _DERIVED.get(problem)
+    if memo is None:
+        with _DERIVED_LOCK:
+            memo = _DERIVED.setdefault(problem, {'flat': None, 'packed': {}})
+    return memo
+
+
 def _packed(problem, options, shape):
     """Return the loops' options and step cap for `shape` (once per solver and options)."""
     key = (id(options), shape)
-    memo = problem.__dict__.setdefault('_engine_packed', {})
+    memo = _derived(problem)['packed']
     hit = memo.get(key)
     if hit is None or hit[0] is not options:
         hit = memo[key] = (options, *options.packed(problem.gradient_scale, shape))
@@ -29,16 +140,17 @@ def _packed(problem, options, shape):
 
 def _flat(problem):
     """``problem.flat()``, once per solver: the loops never write to their start (`_own`)."""
-    flat = problem.__dict__.get('_engine_flat')
-    if flat is None:
-        flat = np.ascontiguousarray(problem.flat(), dtype=float)
-        problem.__dict__['_engine_flat'] = flat
-    return flat
+    memo = _derived(problem)
+    if memo['flat'] is None:
+        with _DERIVED_LOCK:
+            if memo['flat'] is None:
+                memo['flat'] = np.ascontiguousarray(problem.flat(), dtype=float)
+    return memo['flat']
 
 
 def _own(x, problem):
     """`x`, copied if it is the solver's shared flat state (a failed first step returns it)."""
-    return x.copy() if x is problem.__dict__.get('_engine_flat') else x
+    return x.copy() if x is _derived(problem)['flat'] else x
 
 
 def _outcome(out, problem, fraction=1.0):
