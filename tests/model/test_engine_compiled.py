@@ -193,11 +193,11 @@ def _hook_arguments(solver, data, loaded):
     return x, 100e3, nodes, forces
 
 
-@pytest.mark.parametrize('kind', ['CCMBlocks', 'CCMDense', 'PCCData'])
-def test_every_hook_is_a_compiled_kernel(kind):
+@pytest.mark.parametrize('kind, loaded', [('CCMData', False), ('CCMData', True),
+                                          ('PCCData', False)])
+def test_every_hook_is_a_compiled_kernel(kind, loaded):
     design = ActuatorDesign.paper(0.25)
     solver = PCCSolver(design, 22) if kind == 'PCCData' else CCMSolver(design, 8)
-    loaded = kind == 'CCMDense'
     data = solver.kernel_data(loaded)
     assert type(data).__name__ == kind
     hooks = type(data)._kernels
@@ -209,12 +209,14 @@ def test_every_hook_is_a_compiled_kernel(kind):
     energy, grad, hess = hooks['derivatives'](data, x, pressure, nodes, forces)
     # The line search compares this energy with the derivatives' one: the same formula.
     assert hooks['energy'](data, x, pressure, nodes, forces) == energy
-    if kind == 'CCMBlocks':
+    if kind == 'CCMData' and not loaded:
+        assert data.dense is False and hess[0].shape == (8, 4, 4)
         dense = np.zeros((grad.size, grad.size))
-        for i, block in enumerate(hess):
+        for i, block in enumerate(hess[0]):
             dense[4 * i:4 * i + 4, 4 * i:4 * i + 4] = block
-    elif kind == 'CCMDense':
-        dense = hess[0]
+    elif kind == 'CCMData':
+        assert data.dense is True and hess[0].shape == (1, 32, 32)
+        dense = hess[0][0]
     else:
         dense = pcc_kernels._dense_from_band(hess[0])
     assert np.linalg.eigvalsh(dense).min() > 0.0          # the Cholesky paths
@@ -327,6 +329,7 @@ def test_dense_hook_factor_is_the_cholesky_factor_of_its_hessian():
             q = rng.normal(scale=scale, size=(n, 4))
             _, _, (matrix, low, definite) = data._kernels['derivatives'](data, q, 50e3, nodes,
                                                                          forces)
+            matrix = matrix[0]                                  # (1, 4N, 4N): the one matrix
             lam = np.linalg.eigvalsh(matrix)
             assert definite == (lam.min() > 0.0)
             seen.add(bool(definite))

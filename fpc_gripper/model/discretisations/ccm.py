@@ -400,10 +400,10 @@ class CCMSolver:
     def derivatives(self, q, pressure, loads):
         """Energy [J], gradient (N, 4) and Hessian ((N, 4, 4) blocks, or dense when loaded)."""
         data = self._data[bool(loads)]
-        energy, grad, hess = data._kernels['derivatives'](
+        energy, grad, hess = kernels.ccm_derivatives(
             data, np.ascontiguousarray(q, dtype=float), float(pressure),
             *kernels.load_arrays(loads))
-        return energy, grad, hess[0] if loads else hess
+        return energy, grad, hess[0][0] if loads else hess[0]
 
     def step(self, grad, hess):
         """Compute the Newton step, shape (N, 4), and the smallest eigenvalue (1.0 if PD)."""

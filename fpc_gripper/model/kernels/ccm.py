@@ -780,18 +780,20 @@ def newton_step(grad, hess, floor=EIGEN_FLOOR):
 
 
 # -- the engine's discretisation: CCM-N as a namedtuple of arrays ----------------------------
-_CCM_FIELDS = ('stiffness', 'gas_volume', 'gas_moments', 'pemc_basis', 'pemc_weights',
-               'pemc_products', 'prestrain', 'law', 'pressure_coefficient', 'lengths',
-               'consistent')
-#: CCM-N unloaded: (N, 4, 4) Hessian blocks. `engine` runs its loops compiled on it.
-CCMBlocks = collections.namedtuple('CCMBlocks', _CCM_FIELDS)
-#: CCM-N with point loads: dense (4N, 4N) Hessian (the chained frames couple every segment).
-CCMDense = collections.namedtuple('CCMDense', _CCM_FIELDS)
+#: CCM-N as `engine` runs it compiled. `dense` (the scene has point loads) picks the Hessian:
+#: unloaded, the segments decouple into (N, 4, 4) blocks; loaded, the chained frames couple
+#: every segment into one dense (4N, 4N) matrix. One type for both, so that each engine loop
+#: compiles once for the CCM. The Hessian is (blocks or (1, 4N, 4N), factor, definite).
+CCMData = collections.namedtuple('CCMData', (
+    'stiffness', 'gas_volume', 'gas_moments', 'pemc_basis', 'pemc_weights', 'pemc_products',
+    'prestrain', 'law', 'pressure_coefficient', 'lengths', 'consistent', 'dense'))
+#: The factor slot of a block Hessian, which has none.
+_NO_FACTOR = np.zeros((0, 0))
 
 
 def ccm_data(seg, prestrain, emc, pressure_coefficient, consistent, loaded):
     """
-    Return the CCM as the engine's compiled discretisation (`CCMDense` if loaded).
+    Return the CCM as the engine's compiled discretisation (`CCMData`, dense if loaded).
 
     Parameters
     ----------
@@ -807,10 +809,9 @@ def ccm_data(seg, prestrain, emc, pressure_coefficient, consistent, loaded):
     loaded : bool
 
     """
-    kind = CCMDense if loaded else CCMBlocks
-    return kind(seg.stiffness, seg.gas_volume, seg.gas_moments, seg.pemc_basis,
-                seg.pemc_weights, seg.pemc_products, float(prestrain), _law_matrix(emc),
-                float(pressure_coefficient), seg.lengths, bool(consistent))
+    return CCMData(seg.stiffness, seg.gas_volume, seg.gas_moments, seg.pemc_basis,
+                   seg.pemc_weights, seg.pemc_products, float(prestrain), _law_matrix(emc),
+                   float(pressure_coefficient), seg.lengths, bool(consistent), bool(loaded))
 
 
 @_jit
@@ -850,19 +851,16 @@ def ccm_energy(p, q, pressure, nodes, forces):
 
 
 @_jit
-def ccm_blocks_derivatives(p, q, pressure, nodes, forces):
-    """Energy [J], gradient (N, 4) and Hessian blocks (N, 4, 4) of the unloaded CCM."""
-    return _ccm_segment_terms(p, q, pressure)
-
-
-@_jit
-def ccm_dense_derivatives(p, q, pressure, nodes, forces):
+def ccm_derivatives(p, q, pressure, nodes, forces):
     """
-    Energy [J], gradient (N, 4) and Hessian of the CCM with point loads.
+    Energy [J], gradient (N, 4) and Hessian of the CCM.
 
-    The Hessian is (H (4N, 4N), its Cholesky factor, whether H is positive definite).
+    The Hessian is (H, factor, definite): unloaded, H is the (N, 4, 4) blocks and there is
+    no factor; with point loads (`p.dense`), H is (1, 4N, 4N) with its Cholesky factor.
     """
     energy, grad, blocks = _ccm_segment_terms(p, q, pressure)
+    if not p.dense:
+        return energy, grad, (blocks, _NO_FACTOR, True)
     e_load, g_load, hess = load_derivatives_kernel(q, p.lengths, nodes, forces)
     n = q.shape[0]
     for i in range(n):
@@ -871,45 +869,37 @@ def ccm_dense_derivatives(p, q, pressure, nodes, forces):
                 hess[4 * i + a, 4 * i + b] += blocks[i, a, b]
     # The Newton step and the bordered solves all need the factor: once, here.
     low, definite = _dense_cholesky(hess)
-    return energy + e_load, grad + g_load, (hess, low, definite)
+    return energy + e_load, grad + g_load, (hess.reshape(1, 4 * n, 4 * n), low, definite)
 
 
 @_jit
-def ccm_blocks_step(p, grad, hess):
-    """Newton step (N, 4) and smallest eigenvalue (1.0 if PD) for Hessian blocks."""
-    return newton_step_blocks(grad, hess, EIGEN_FLOOR)
-
-
-@_jit
-def ccm_dense_step(p, grad, hess):
-    """Newton step (N, 4) and smallest eigenvalue (1.0 if PD) for a dense Hessian."""
+def ccm_step(p, grad, hess):
+    """Newton step (N, 4) and smallest eigenvalue (1.0 if PD) of `ccm_derivatives`' H."""
     matrix, low, definite = hess
-    step, min_eig = _factored_step(grad.ravel(), matrix, low, definite, EIGEN_FLOOR)
+    if not p.dense:
+        return newton_step_blocks(grad, matrix, EIGEN_FLOOR)
+    step, min_eig = _factored_step(grad.ravel(), matrix[0], low, definite, EIGEN_FLOOR)
     return step.reshape(grad.shape), min_eig
 
 
 @_jit
-def ccm_blocks_solve_linear(p, hess, rhs):
-    """Solve the block system H x = rhs (N, 4): (x, True), or (rhs, False) if singular."""
-    out = np.empty_like(rhs)
-    try:
-        for i in range(rhs.shape[0]):
-            out[i] = np.linalg.solve(hess[i], rhs[i])
-    except Exception:
-        return rhs.copy(), False
-    return out, True
-
-
-@_jit
-def ccm_dense_solve_linear(p, hess, rhs):
-    """Solve the dense system H x = rhs (N, 4): (x, True), or (rhs, False) if singular."""
+def ccm_solve_linear(p, hess, rhs):
+    """Solve H x = rhs (N, 4) of `ccm_derivatives`' H: (x, True), or (rhs, False) if singular."""
     matrix, low, definite = hess
+    if not p.dense:
+        out = np.empty_like(rhs)
+        try:
+            for i in range(rhs.shape[0]):
+                out[i] = np.linalg.solve(matrix[i], rhs[i])
+        except Exception:
+            return rhs.copy(), False
+        return out, True
     if definite:
         out = np.empty(rhs.size)
         _cholesky_substitute(low, rhs.ravel(), out)
         return out.reshape(rhs.shape), True
     try:
-        return np.linalg.solve(matrix, rhs.ravel()).reshape(rhs.shape), True
+        return np.linalg.solve(matrix[0], rhs.ravel()).reshape(rhs.shape), True
     except Exception:
         return rhs.copy(), False
 
@@ -920,9 +910,5 @@ def ccm_node_jacobian(p, q, node):
     return node_jacobian_kernel(q, p.lengths, node)
 
 
-CCMBlocks._kernels = {'derivatives': ccm_blocks_derivatives, 'energy': ccm_energy,
-                      'step': ccm_blocks_step, 'solve_linear': ccm_blocks_solve_linear,
-                      'node_jacobian': ccm_node_jacobian}
-CCMDense._kernels = {'derivatives': ccm_dense_derivatives, 'energy': ccm_energy,
-                     'step': ccm_dense_step, 'solve_linear': ccm_dense_solve_linear,
-                     'node_jacobian': ccm_node_jacobian}
+CCMData._kernels = {'derivatives': ccm_derivatives, 'energy': ccm_energy, 'step': ccm_step,
+                    'solve_linear': ccm_solve_linear, 'node_jacobian': ccm_node_jacobian}
