@@ -38,6 +38,8 @@ def _contact_entry(problem, x, lam, status, depth, pressure, nodes, forces, con,
                     grow)
 
 
+# The batches call the single entries, compiled functions of their own, so that each loop
+# compiles once per discretisation type whether one scene or a grid runs it.
 @jit
 def _solve_batch_entry(problems, design, pressures, nodes, forces, initial, flat, options, cap,
                        tip):
@@ -50,7 +52,7 @@ def _solve_batch_entry(problems, design, pressures, nodes, forces, initial, flat
     for i in range(count):
         problem = problems[design[i]]
         start = initial[i] if warm else flat
-        x, code, its, grad, step, eig, fraction = _solve(
+        x, code, its, grad, step, eig, fraction = _solve_entry(
             problem, start, warm, flat, pressures[i], nodes, forces[i], options, cap)
         states[i] = x
         status[i] = code
@@ -78,7 +80,7 @@ def _rigidity_batch_entry(unloaded, loaded, design, pressures, node, direction, 
     forces = np.zeros((0, 2))
     for i in range(count):
         d = design[i]
-        x, code, its, grad, step, eig, fraction = _solve(
+        x, code, its, grad, step, eig, fraction = _solve_entry(
             unloaded[d], flat, False, flat, pressures[i], nodes, forces, options, cap)
         free[i] = x
         status[i] = code
@@ -92,7 +94,7 @@ def _rigidity_batch_entry(unloaded, loaded, design, pressures, node, direction, 
         states[i] = x
         if code != _SUCCESS:
             continue
-        y, force, ok, its, done, stable, gradient = _rigidity(
+        y, force, ok, its, done, stable, gradient = _rigidity_entry(
             loaded[d], x, pressures[i], node, direction, displacement, options, cap)
         position = _node_jacobian(loaded[d], y, node)[0]
         states[i] = y
