@@ -203,8 +203,16 @@ def _spawn(args, env_extra, cwd):
                             cwd=cwd, env=env, stdout=subprocess.PIPE, text=True)
 
 
+#: The two workers' parts on 2 cores, by measurement: parts in one process share what they
+#: compile (grids compiles most of ccm, adaptive and the arc), which dealing by cost alone
+#: cannot see. Measured: 96 s and 117 s per worker this way, 126 s and 100 s dealt.
+TWO_LANES = (('contact', 'pcc'), ('grids', 'ccm', 'adaptive', 'ladder'))
+
+
 def _split(names, jobs):
     """Deal the parts to `jobs` workers, the costliest first to the least loaded."""
+    if jobs == 2 and sorted(names) == sorted(sum(TWO_LANES, ())):
+        return [list(lane) for lane in TWO_LANES]
     groups = [[] for _ in range(jobs)]
     loads = [0.0] * jobs
     for name in sorted(names, key=lambda n: -PARTS[n].seconds):
