@@ -169,7 +169,8 @@ class Part(typing.NamedTuple):
     """One part of the build: what it runs, what it costs, how hard LLVM optimises it."""
 
     run: typing.Callable[[], None]
-    #: Seconds it compiles for with the other worker busy, measured: the cost deals them.
+    #: Seconds it compiles for with the other worker busy, measured in its lane (ccm: 4 s
+    #: after grids, about 30 alone): the cost deals them on other than 2 workers.
     seconds: float
     #: LLVM's optimisation level (numba's NUMBA_OPT). Level 1 compiles in 0.6x the time of
     #: numba's default 3 and runs the solves, rigidities and batches as fast (within 1 %,
@@ -178,8 +179,8 @@ class Part(typing.NamedTuple):
 
 
 PARTS = {
-    'ccm': Part(_ccm, 55, 1), 'contact': Part(_contact, 89, 3), 'grids': Part(_grids, 75, 1),
-    'pcc': Part(_pcc, 32, 1), 'ladder': Part(_ladder, 25, 1), 'adaptive': Part(_adaptive, 2, 1),
+    'ccm': Part(_ccm, 4, 1), 'contact': Part(_contact, 72, 3), 'grids': Part(_grids, 94, 1),
+    'pcc': Part(_pcc, 23, 1), 'ladder': Part(_ladder, 18, 1), 'adaptive': Part(_adaptive, 1, 1),
 }
 
 
