@@ -8,6 +8,7 @@ import pytest
 from fpc_gripper.model import ActuatorDesign, engine, PCCSolver, SolverStatus
 from fpc_gripper.model import contact as C
 from fpc_gripper.model.kernels import contact as ck
+from fpc_gripper.model.obstacles import obstacle_params
 from fpc_gripper.model.pipeline import contact_model
 from fpc_gripper.model.section.law import station_layout
 
@@ -36,7 +37,7 @@ def random_state(solver, seed, spread=0.02, pressure=50e3):
 # -- the obstacles' gap functions -----------------------------------------------------------
 @pytest.mark.parametrize('obstacle', OBSTACLES, ids=lambda o: type(o).__name__)
 def test_gap_function_derivatives_against_differences(obstacle):
-    kind, params = C._params((obstacle,))
+    kind, params = obstacle_params((obstacle,))
     rng = np.random.default_rng(3)
     points = np.array([0.05, -0.05]) + 0.03 * rng.standard_normal((40, 2))
     if isinstance(obstacle, C.ConvexPolygon):
@@ -69,7 +70,7 @@ def test_gap_is_the_distance_where_it_claims_to_be():
             (OBSTACLES[3], lambda t: np.array([0.05, -0.05]) + np.stack(
                 [0.02 * np.cos(t) * np.cos(0.3) - 0.01 * np.sin(t) * np.sin(0.3),
                  0.02 * np.cos(t) * np.sin(0.3) + 0.01 * np.sin(t) * np.cos(0.3)], 1))]:
-        kind, params = C._params((obstacle,))
+        kind, params = obstacle_params((obstacle,))
         curve = boundary(np.linspace(0, 2 * np.pi, 200001))
         for p in np.array([0.05, -0.05]) + 0.04 * rng.standard_normal((10, 2)):
             g = ck.signed_distance(int(kind[0]), params[0], *p)[0]

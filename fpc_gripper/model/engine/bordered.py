@@ -45,7 +45,7 @@ pseg, poff, pz : ndarray, shape (K,)
     Candidate finger points: segment (int), reference arc length into it [m], height from
     the midplane along its normal [m] (-H/2: the PEMC face, +H/2: the CL face).
 kind : ndarray of int, shape (B,)
-    Obstacle kinds (`contact_kernels`).
+    Obstacle kinds (`kernels.contact`).
 params : ndarray, shape (B, P)
     Obstacle parameter rows, in the finger frame at the obstacle's current pose.
 pair_point, pair_object : ndarray of int, shape (C,)

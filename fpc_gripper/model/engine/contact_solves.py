@@ -27,7 +27,7 @@ class ContactOutcome(typing.NamedTuple):
         Per pair: (lambda_N [N], 0) in contact without sticking; the force (F_X, F_Z) on the
         finger [N] when sticking; zeros when free.
     pair_status : ndarray of int, shape (C,)
-        `contact_kernels` status of every pair.
+        `kernels.contact` status of every pair.
     anchors : ndarray, shape (C, 2)
         The anchors the step used [m].
     fraction : float
