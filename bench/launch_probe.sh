@@ -11,9 +11,7 @@ LP=$!
 timeout 60 ros2 topic echo --once /markers visualization_msgs/msg/MarkerArray > /tmp/ro_marker$round.txt 2>&1 &
 EP=$!
 # A user's first goal: an aperture of 80 mm, sent as soon as the controller subscribes.
-# Two subscribers (the controller and the recorder): with -w 1 the one message could go to the
-# recorder alone, matched first, and the controller never see it.
-timeout 60 ros2 topic pub -w 2 --once /aperture_command std_msgs/msg/Float64 '{data: 0.08}' > /tmp/ro_pub$round.txt 2>&1
+timeout 60 ros2 topic pub -w 1 --once /aperture_command std_msgs/msg/Float64 '{data: 0.08}' > /tmp/ro_pub$round.txt 2>&1
 echo "round $round: goal sent after $(echo "$(date +%s.%N) - $start" | bc) s"
 wait $EP; erc=$?
 echo "round $round: first /markers after $(echo "$(date +%s.%N) - $start" | bc) s (echo rc $erc, $(wc -l < /tmp/ro_marker$round.txt) lines)"
