@@ -10,11 +10,14 @@ setsid ros2 launch fpc_gripper gripper.launch.py > $LOG 2>&1 &
 LP=$!
 timeout 60 ros2 topic echo --once /markers visualization_msgs/msg/MarkerArray > /tmp/ro_marker$round.txt 2>&1 &
 EP=$!
-# A user's first goal: an aperture of 80 mm, sent as soon as the controller subscribes.
-timeout 60 ros2 topic pub -w 1 --once /aperture_command std_msgs/msg/Float64 '{data: 0.08}' > /tmp/ro_pub$round.txt 2>&1
-echo "round $round: goal sent after $(echo "$(date +%s.%N) - $start" | bc) s"
+# A user's first goal: an aperture of 80 mm, repeated at 5 Hz until the first /markers (one
+# message can reach the recorder, which subscribes too, before the controller has matched).
+timeout 60 ros2 topic pub -r 5 /aperture_command std_msgs/msg/Float64 '{data: 0.08}' > /tmp/ro_pub$round.txt 2>&1 &
+PP=$!
 wait $EP; erc=$?
-echo "round $round: first /markers after $(echo "$(date +%s.%N) - $start" | bc) s (echo rc $erc, $(wc -l < /tmp/ro_marker$round.txt) lines)"
+seen=$(echo "$(date +%s.%N) - $start" | bc)
+kill $PP 2>/dev/null; wait $PP 2>/dev/null
+echo "round $round: first /markers after $seen s (echo rc $erc, $(wc -l < /tmp/ro_marker$round.txt) lines; goals published: $(grep -c '^publishing #' /tmp/ro_pub$round.txt))"
 ros2 topic list > /tmp/ro_topics$round.log 2>&1
 sleep 2
 t0=$(date +%s.%N)
