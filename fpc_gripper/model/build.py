@@ -63,7 +63,7 @@ def _engine_calls(solver, force):
         if hasattr(solver, 'solve_linear'):
             solver.solve_linear(hess, grad)
         data = solver.kernel_data(bool(load))
-        hooks = type(data)._kernels
+        hooks = engine.hooks_of(type(data))
         nodes, forces = kernels.load_arrays(load)
         _, grad, hess = hooks['derivatives'](data, x, 5.0e4, nodes, forces)
         hooks['energy'](data, x, 5.0e4, nodes, forces)

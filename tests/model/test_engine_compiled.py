@@ -200,7 +200,7 @@ def test_every_hook_is_a_compiled_kernel(kind, loaded):
     solver = PCCSolver(design, 22) if kind == 'PCCData' else CCMSolver(design, 8)
     data = solver.kernel_data(loaded)
     assert type(data).__name__ == kind
-    hooks = type(data)._kernels
+    hooks = engine.hooks_of(type(data))
     base = ['derivatives', 'energy', 'node_jacobian', 'solve_linear', 'step']
     # The PCC has face points too (contact): docs/physics.md, section 15.2.
     points = ['point_derivatives', 'point_jacobian', 'point_positions']
@@ -327,8 +327,8 @@ def test_dense_hook_factor_is_the_cholesky_factor_of_its_hessian():
         nodes, forces = kernels.load_arrays(solver._loads(force, []))
         for _ in range(3):
             q = rng.normal(scale=scale, size=(n, 4))
-            _, _, (matrix, low, definite) = data._kernels['derivatives'](data, q, 50e3, nodes,
-                                                                         forces)
+            _, _, (matrix, low, definite) = engine.hooks_of(type(data))['derivatives'](
+                data, q, 50e3, nodes, forces)
             matrix = matrix[0]                                  # (1, 4N, 4N): the one matrix
             lam = np.linalg.eigvalsh(matrix)
             assert definite == (lam.min() > 0.0)
@@ -424,3 +424,19 @@ def test_warm_start_never_changes_the_answer(name):
     assert fallback.iterations == attempt.iterations + cold.iterations
     # From flat again: the cold solve's arithmetic (round-off apart, see RTOL).
     assert deviation(fallback.x, cold.x) <= RTOL
+
+
+def test_register_names_a_missing_or_unknown_hook():
+    import collections
+    fake = collections.namedtuple('FakeData', ('a',))
+    hooks = dict(engine.hooks_of(type(CCMSolver(ActuatorDesign.paper(0.25), 4)
+                                      .kernel_data(False))))
+    del hooks['energy']
+    with pytest.raises(ValueError, match=r"FakeData.*missing \['energy'\], unknown \[\]"):
+        engine.register(fake, hooks)
+    hooks['energy'] = hooks['derivatives']
+    hooks['gradient'] = hooks['derivatives']
+    with pytest.raises(ValueError, match=r"missing \[\], unknown \['gradient'\]"):
+        engine.register(fake, hooks)
+    with pytest.raises(KeyError):
+        engine.hooks_of(fake)                   # neither attempt registered it

@@ -3,13 +3,16 @@
 import numpy as np
 
 from .rung import ArcResult, RungSolver, set_common
-from ..engine import linear_solve, NewtonOptions
+from ..engine import linear_solve, NewtonOptions, register
 from ..kernels import arc as arc_kernels
 from ..kernels.ccm import load_arrays
 from ..kernels.pcc import half_angle_sinc_kernel, section_arrays
 from ..section.law import station_layout
 
 __all__ = ['ArcSolver']
+
+# The engine runs this discretisation compiled through these hooks (`engine.register`).
+register(arc_kernels.ArcData, arc_kernels.ARC_HOOKS)
 
 #: Gauss rule on [0, 1] for the arc integrals int_0^1 (cos, sin)(phi t) t^k dt; exact to
 #: round-off for |phi| up to about 40 rad (several full turns).

@@ -21,6 +21,9 @@ __all__ = ['CCMSolver', 'CCMResult', 'RigidityResult', 'SolverStatus', 'PRESSURE
            'PRESSURE_MODEL_NAMES', 'AXES', 'check_rigidity', 'rigidity_result',
            'check_pressure_model', 'pressure_work_factor']
 
+# The engine runs this discretisation compiled through these hooks (`engine.register`).
+engine.register(kernels.CCMData, kernels.CCM_HOOKS)
+
 #: Midplane reconstructions: the paper's, or one that converges to the rod as N grows
 #: (kinematics.consistent_strain_map).
 RECONSTRUCTIONS = ('paper', 'consistent')

@@ -3,12 +3,15 @@
 import numpy as np
 
 from .rung import check_common, LadderResult, RungSolver, set_common
-from ..engine import NewtonOptions
+from ..engine import NewtonOptions, register
 from ..kernels import pcc as kernels
 from ..section.law import station_layout
 from ..section.segments import share_segments
 
 __all__ = ['PCCSolver', 'PCCResult', 'pcc_edges', 'half_angle_sinc']
+
+# The engine runs this discretisation compiled through these hooks (`engine.register`).
+register(kernels.PCCData, kernels.PCC_HOOKS)
 
 #: Step caps: 0.1 on (eps, c1) as the rod, 0.5 rad on the angles.
 _CAP = np.array([0.1, 0.1, 0.5])

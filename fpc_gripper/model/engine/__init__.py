@@ -10,11 +10,12 @@ once (`newton`, `bordered`, `active_set`) and run compiled through the entries (
 from .batches import BatchOutcome, BatchRigidity, rigidity_batch, solve_batch
 from .bordered import ContactSet, NodeLine
 from .contact_solves import contact_path, contact_solve, contact_step, ContactOutcome, next_anchors
-from .newton import linear_solve, linear_step
+from .newton import HOOKS, hooks_of, linear_solve, linear_step, POINT_HOOKS, register
 from .outcomes import BorderedOutcome, NewtonOptions, NewtonOutcome, SolverStatus
 from .solves import newton, rigidity, sensitivity, solve
 
-__all__ = ['SolverStatus', 'NewtonOptions', 'NewtonOutcome', 'newton', 'solve', 'rigidity',
-           'linear_step', 'linear_solve', 'BorderedOutcome', 'solve_batch', 'rigidity_batch',
-           'BatchOutcome', 'BatchRigidity', 'sensitivity', 'ContactSet', 'NodeLine',
-           'ContactOutcome', 'contact_solve', 'contact_step', 'contact_path', 'next_anchors']
+__all__ = ['register', 'hooks_of', 'HOOKS', 'POINT_HOOKS', 'SolverStatus', 'NewtonOptions',
+           'NewtonOutcome', 'newton', 'solve', 'rigidity', 'linear_step', 'linear_solve',
+           'BorderedOutcome', 'solve_batch', 'rigidity_batch', 'BatchOutcome', 'BatchRigidity',
+           'sensitivity', 'ContactSet', 'NodeLine', 'ContactOutcome', 'contact_solve',
+           'contact_step', 'contact_path', 'next_anchors']

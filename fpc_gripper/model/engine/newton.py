@@ -30,11 +30,47 @@ def linear_solve(hess, rhs):
 
 # -- the discretisation interface ----------------------------------------------------------
 # A discretisation is either a Python object with methods (the loops then run interpreted)
-# or a namedtuple of arrays whose class carries `_kernels`, a dict of compiled functions of
-# the same names taking the namedtuple first (the loops then run compiled, for that
-# namedtuple type). These functions are that interface; the loops call nothing else. The
-# first five serve every solve; the three `_point_*` (face points: the PCC and the rod)
-# serve contact only.
+# or a namedtuple of arrays whose type is registered here (`register`) with compiled
+# functions of the same names taking the namedtuple first (the loops then run compiled, for
+# that type). These functions are that interface; the loops call nothing else. The first
+# five (`HOOKS`) serve every solve; the three `_point_*` (`POINT_HOOKS`: face points, the PCC
+# and the rod) serve contact only.
+HOOKS = ('derivatives', 'energy', 'step', 'solve_linear', 'node_jacobian')
+POINT_HOOKS = ('point_derivatives', 'point_jacobian', 'point_positions')
+_REGISTERED = {}
+
+
+def register(data_type, hooks):
+    """
+    Register the compiled hooks of a discretisation's data type, a namedtuple class.
+
+    Parameters
+    ----------
+    data_type : type
+        The namedtuple class its `kernel_data` returns.
+    hooks : dict
+        numba dispatchers by name: every name of `HOOKS`, and those of `POINT_HOOKS` for a
+        discretisation with face points (contact).
+
+    Raises
+    ------
+    ValueError
+        Where a name of `HOOKS` is missing or a name is not a hook.
+
+    """
+    missing = [name for name in HOOKS if name not in hooks]
+    unknown = [name for name in hooks if name not in HOOKS + POINT_HOOKS]
+    if missing or unknown:
+        raise ValueError(f'`hooks` of {data_type.__name__} must name every one of {HOOKS} and '
+                         f'only those or {POINT_HOOKS}; missing {missing}, unknown {unknown}')
+    _REGISTERED[data_type] = dict(hooks)
+
+
+def hooks_of(data_type):
+    """Return the compiled hooks registered for a data type, by name (a copy)."""
+    return dict(_REGISTERED[data_type])
+
+
 def _loads(nodes, forces):
     return [(int(node), forces[k]) for k, node in enumerate(nodes)]
 
@@ -84,9 +120,9 @@ def _point_jacobian(problem, x, seg, offset, z):
 
 
 def _kernel(problem, name):
-    """Return the compiled `name` of a namedtuple discretisation type, None for others."""
+    """Return the compiled `name` of a registered namedtuple type, None for others."""
     if isinstance(problem, types.BaseNamedTuple):
-        return getattr(problem.instance_class, '_kernels', {}).get(name)
+        return _REGISTERED.get(problem.instance_class, {}).get(name)
     return None
 
 

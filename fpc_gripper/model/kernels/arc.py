@@ -181,5 +181,6 @@ def arc_node_jacobian(p, x, node):
     return position, jac
 
 
-ArcData._kernels = {'derivatives': arc_derivatives, 'energy': arc_energy, 'step': arc_step,
-                    'solve_linear': arc_solve_linear, 'node_jacobian': arc_node_jacobian}
+#: The arc's hooks, by the engine's names (`engine.register` takes them).
+ARC_HOOKS = {'derivatives': arc_derivatives, 'energy': arc_energy, 'step': arc_step,
+             'solve_linear': arc_solve_linear, 'node_jacobian': arc_node_jacobian}

@@ -910,5 +910,6 @@ def ccm_node_jacobian(p, q, node):
     return node_jacobian_kernel(q, p.lengths, node)
 
 
-CCMData._kernels = {'derivatives': ccm_derivatives, 'energy': ccm_energy, 'step': ccm_step,
-                    'solve_linear': ccm_solve_linear, 'node_jacobian': ccm_node_jacobian}
+#: The CCM's hooks, by the engine's names (`engine.register` takes them).
+CCM_HOOKS = {'derivatives': ccm_derivatives, 'energy': ccm_energy, 'step': ccm_step,
+             'solve_linear': ccm_solve_linear, 'node_jacobian': ccm_node_jacobian}

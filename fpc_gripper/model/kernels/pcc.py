@@ -928,8 +928,8 @@ def pcc_point_jacobian(p, x, seg, offset, z):
     return point_jacobian_kernel(x, p.lengths, seg, offset, z)
 
 
-PCCData._kernels = {'derivatives': pcc_derivatives, 'energy': pcc_energy, 'step': pcc_step,
-                    'solve_linear': pcc_solve_linear, 'node_jacobian': pcc_node_jacobian,
-                    'point_derivatives': pcc_point_derivatives,
-                    'point_positions': pcc_point_positions,
-                    'point_jacobian': pcc_point_jacobian}
+#: The PCC's hooks, by the engine's names (`engine.register` takes them).
+PCC_HOOKS = {'derivatives': pcc_derivatives, 'energy': pcc_energy, 'step': pcc_step,
+             'solve_linear': pcc_solve_linear, 'node_jacobian': pcc_node_jacobian,
+             'point_derivatives': pcc_point_derivatives, 'point_positions': pcc_point_positions,
+             'point_jacobian': pcc_point_jacobian}
