@@ -108,6 +108,10 @@ class FingerPoints:
     weight: np.ndarray
 
 
+#: The face points of each solver and contact settings (weak keys: they go with the solver).
+_FINGER_POINTS = weakref.WeakKeyDictionary()
+
+
 def finger_points(solver, settings=ContactSettings()):
     """
     Contact points of a finger: fixed material points on its faces.
@@ -133,16 +137,10 @@ def finger_points(solver, settings=ContactSettings()):
     _check_solver(solver)
     # A function of the solver's edges and the settings: built once per solver, and kept
     # here rather than on the solver, which contact never writes into.
-    memo = _FINGER_POINTS.get(solver)
-    if memo is None:
-        memo = _FINGER_POINTS.setdefault(solver, {})
+    memo = _FINGER_POINTS.setdefault(solver, {})
     if settings not in memo:
         memo[settings] = _finger_points(solver, settings)
     return memo[settings]
-
-
-#: The face points of each solver and contact settings (weak keys: they go with the solver).
-_FINGER_POINTS = weakref.WeakKeyDictionary()
 
 
 def _check_solver(solver):
