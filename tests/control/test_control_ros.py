@@ -2,7 +2,6 @@
 
 import itertools
 import math
-import os
 import time
 
 from control_sim import circumdiameter, fresh_solver
@@ -40,29 +39,11 @@ RADIUS = CONFIG.palm_radius
 #: Settling time stated for an aperture step in the ROS loop (message stamps) [s]. The
 #: deterministic ROS-free test holds the law to 1.5 s; this leaves room for scheduling.
 SETTLING_S = 2.5
-
 #: Feedback timeout of rigs that do not test feedback loss [s] (the default is 0.5 s).
 RIG_FEEDBACK_TIMEOUT_S = 3.0
 #: Feedback timeout of the tests of feedback loss [s]: above any stall of the rig's thread.
 FEEDBACK_LOSS_S = 2.0
 _counter = itertools.count()
-
-
-@pytest.fixture(scope='module', autouse=True)
-def _above_the_other_worker():
-    """Run this module's closed loops above the other worker's tests, where permitted."""
-    # These loops are judged in wall time (issue 22 moves them to simulated time): on 2
-    # cores the other worker once stalled one for longer than its settling window.
-    before = os.getpriority(os.PRIO_PROCESS, 0)
-    try:
-        os.setpriority(os.PRIO_PROCESS, 0, before - 5)
-    except OSError:
-        pass                                   # not permitted: the default priority
-    yield
-    try:
-        os.setpriority(os.PRIO_PROCESS, 0, before)
-    except OSError:
-        pass
 
 
 @pytest.fixture(scope='module')
