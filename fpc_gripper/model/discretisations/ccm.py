@@ -15,17 +15,16 @@ from ..kernels import ccm as kernels
 from ..kernels.ccm import node_jacobian
 from ..section.segments import build_segments, uniform_edges
 from ..validation import (arc_lengths, check_force, check_load, check_pressure_model,
-                          PRESSURE_MODEL_NAMES, PRESSURE_MODELS, real_number, warm_start_allowed)
+                          PRESSURE_MODELS, real_number, warm_start_allowed)
 
-__all__ = ['CCMSolver', 'CCMResult', 'RigidityResult', 'SolverStatus', 'PRESSURE_MODELS',
-           'PRESSURE_MODEL_NAMES', 'AXES', 'check_rigidity', 'rigidity_result',
-           'check_pressure_model', 'pressure_work_factor']
+__all__ = ['CCMSolver', 'CCMResult', 'RigidityResult', 'SolverStatus', 'AXES', 'check_rigidity',
+           'rigidity_result', 'pressure_work_factor']
 
 # The engine runs this discretisation compiled through these hooks (`engine.register`).
 engine.register(kernels.CCMData, kernels.CCM_HOOKS)
 
 #: Midplane reconstructions: the paper's, or one that converges to the rod as N grows
-#: (kinematics.consistent_strain_map).
+#: (ccm_geometry.consistent_strain_map).
 RECONSTRUCTIONS = ('paper', 'consistent')
 #: Largest Newton step in any scaled unknown; keeps iterates where the quintic PEMC
 #: energy (unbounded below at large tension) is meaningful.
@@ -303,7 +302,7 @@ class CCMSolver:
     reconstruction : {'paper', 'consistent'}
         'paper' (default, SPEC) or 'consistent': segment chords and end rotations
         that converge to the rod's as N grows (deformed curvature kappa / (1 + eps));
-        see `kinematics.consistent_strain_map`. With 'consistent', `coefficients`
+        see `ccm_geometry.consistent_strain_map`. With 'consistent', `coefficients`
         hold the reconstruction coefficients; map them with that function to get
         the strain's (b1, b3, c1, d).
 

@@ -317,7 +317,7 @@ def consistent_strain_map_kernel(q):
     Strain unknowns of the 'consistent' reconstruction, with first and second derivatives.
 
     b1 = bt1 + 3 bt3 L^2, b3 L^2 = -2 bt3 L^2, d L = dt L / (1 + b1); see
-    `kinematics.consistent_strain_map`.
+    `ccm_geometry.consistent_strain_map`.
 
     Returns
     -------
@@ -358,17 +358,17 @@ def consistent_strain_map_kernel(q):
 
 
 def end_rotation(q):
-    """Compiled `kinematics.end_rotation`, shape (N,) [rad]."""
+    """Compiled `ccm_geometry.end_rotation`, shape (N,) [rad]."""
     return end_rotation_kernel(q)
 
 
 def node_positions(q, lengths):
-    """Compiled `kinematics.node_positions`: (nodes (N + 1, 2), theta (N,), beta (N,))."""
+    """Compiled `ccm_geometry.node_positions`: (nodes (N + 1, 2), theta (N,), beta (N,))."""
     return node_positions_kernel(q, lengths)
 
 
 def consistent_strain_map(q):
-    """Compiled `kinematics.consistent_strain_map`: (qs (N, 4), jac, hess3 (N, 4, 4))."""
+    """Compiled `ccm_geometry.consistent_strain_map`: (qs (N, 4), jac, hess3 (N, 4, 4))."""
     return consistent_strain_map_kernel(q)
 
 
