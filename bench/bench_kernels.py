@@ -14,7 +14,7 @@ from timing import machine, numba_cache_files, run_process  # noqa: E402
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / 'tests' / 'model'))
 import ccm_reference as reference  # noqa: E402, I100 (the numpy formulas the kernels replaced)
 from fpc_gripper.model import ActuatorDesign, CCMSolver  # noqa: E402, I100, I201
-from fpc_gripper.model.kernels import ccm as kernels  # noqa: E402, I100, I201
+from fpc_gripper.model.kernels import ccm as kernels, chain, linear  # noqa: E402, I100, I201
 
 RESULTS = pathlib.Path(__file__).resolve().parent / 'results' / 'kernels.json'
 PRESTRAIN, PRESSURE, N_SEGMENTS = 0.25, 100e3, 8
@@ -74,15 +74,15 @@ def call_times(repeats):
             'segment_derivatives': (lambda: reference.segment_derivatives(q, seg, *params),
                                     lambda: kernels.segment_derivatives(q, seg, *params)),
             'load_energy': (lambda: reference.load_energy(q, lengths, loads),
-                            lambda: kernels.load_energy(q, lengths, loads)),
+                            lambda: chain.load_energy(q, lengths, loads)),
             'load_derivatives': (lambda: reference.load_derivatives(q, lengths, loads),
-                                 lambda: kernels.load_derivatives(q, lengths, loads)),
+                                 lambda: chain.load_derivatives(q, lengths, loads)),
             'node_positions': (lambda: reference.node_positions(q, lengths),
-                               lambda: kernels.node_positions(q, lengths)),
+                               lambda: chain.node_positions(q, lengths)),
             'consistent_strain_map': (lambda: reference.consistent_strain_map(q),
-                                      lambda: kernels.consistent_strain_map(q)),
+                                      lambda: chain.consistent_strain_map(q)),
             'newton_step': (lambda: reference.newton_step(grad, hess),
-                            lambda: kernels.newton_step(grad, hess)),
+                            lambda: linear.newton_step(grad, hess)),
         }
         rows = {}
         for key, (numpy_fn, numba_fn) in pairs.items():

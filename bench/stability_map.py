@@ -107,7 +107,7 @@ def plain_newton(solver, pressure, loads):
 
 def damped_newton(solver, pressure, loads):
     """Run the engine's damped Newton from the flat state, without continuation."""
-    out = engine.newton(solver, solver.flat(), pressure, loads, solver._options)
+    out = engine.newton(solver.engine_problem, solver.flat(), pressure, loads, solver._options)
     return out.x, out.status in (SolverStatus.SUCCESS, SolverStatus.UNSTABLE), out.iterations
 
 

@@ -17,6 +17,9 @@ Measure the Cython spike against numba on the unloaded CCM-8 solve; write the JS
    eigenvalue step on indefinite blocks).
 
 Results go to bench/results/spike_aot.json.
+
+It drives the engine's single-scene entry of its time, ``_solve_entry(data, initial, warm,
+flat, ...)``; that entry now takes S scenes. Run it at commit 22e61e6 to repeat the spike.
 """
 
 import argparse

@@ -207,7 +207,9 @@ class _Problem:
             scene = model['scenes'][key] = _Scene(result, solver.unknowns(result),
                                                   solver.tip_loads(force))
         if sensitivities and scene.rates is None:
-            scene.rates = engine.sensitivity(solver, scene.x, pressure, scene.loads)[0]
+            scene.rates = engine.sensitivity(
+                solver.engine_problem, scene.x, pressure, scene.loads,
+                solver.parameter_gradient(scene.x, pressure, scene.loads))[0]
         return scene
 
     def _rigidity(self, model, pressure, axis, displacement, sensitivities):
@@ -230,8 +232,10 @@ class _Problem:
             tip = solver.tip_node
             direction = AXES[axis]
             along = np.tensordot(direction, solver.node_jacobian(free.x, tip)[1], axes=1)
-            scene.rates = engine.sensitivity(solver, scene.x, pressure, scene.loads,
-                                             control=(tip, direction, free.rates @ along))[1]
+            scene.rates = engine.sensitivity(
+                solver.engine_problem, scene.x, pressure, scene.loads,
+                solver.parameter_gradient(scene.x, pressure, scene.loads),
+                control=(tip, direction, free.rates @ along))[1]
         return scene
 
     # -- predictions ----------------------------------------------------------------------

@@ -74,6 +74,11 @@ def _settings(settings):
     return settings
 
 
+def _compiled(solver):
+    """Whether a rung runs compiled (a batch can take it), not interpreted (the rod)."""
+    return isinstance(solver.engine_problem, engine.CompiledProblem)
+
+
 class _Groups:
     """
     Scenes grouped by the compiled batch that solves them.
@@ -90,9 +95,10 @@ class _Groups:
         memo = (id(solver), loaded)
         key = self._keys.get(memo)
         if key is None:
-            flat = engine.solves._flat(solver)
-            opts, cap = engine.solves._packed(solver, solver._options, flat.shape)
-            key = self._keys[memo] = (type(solver.kernel_data(loaded)), flat.shape, opts,
+            problem = solver.engine_problem
+            flat = engine.solves._flat(problem)
+            opts, cap = engine.solves._packed(problem, solver._options, flat.shape)
+            key = self._keys[memo] = (type(problem.data[loaded]), flat.shape, opts,
                                       cap.tobytes(), loaded, solver.n_segments)
         return key
 
@@ -209,7 +215,7 @@ class GridResult:
                 states[lo:hi], lengths, slots[lo:hi], solver.samples_per_segment), rows.size)
         if isinstance(solver, PCCSolver):
             _, p, f = np.unravel_index(scenes, self.shape)
-            datas = numba.typed.List([s.kernel_data(False) for s in solvers])
+            datas = numba.typed.List([s.engine_problem.data[False] for s in solvers])
             segment = np.array([s._sample_segment for s in solvers])
             offset = np.array([s._sample_offset for s in solvers])
             states, slots = batch.states[rows], slots[rows]
@@ -336,7 +342,7 @@ def solve_grid(designs, pressures, tip_forces=((0.0, 0.0),), settings=ModelSetti
     for d, design in enumerate(designs):
         model = out._models[d] = finger_model(design, settings)
         base = d * per_design
-        if not isinstance(model, AdaptiveSolver) and not hasattr(model, 'kernel_data'):
+        if not isinstance(model, AdaptiveSolver) and not _compiled(model):
             # A fixed rung that does not run compiled (the rod): its own solves.
             for k in range(per_design):
                 out._single(base + k, model.solve(scene_p[k], scene_f[k]))
@@ -352,7 +358,7 @@ def solve_grid(designs, pressures, tip_forces=((0.0, 0.0),), settings=ModelSetti
         for k, (solver, choice) in enumerate(zip(*_choices(model, scene_p, scene_f))):
             scene = base + k
             out._choices[scene] = choice
-            if hasattr(solver, 'kernel_data'):
+            if _compiled(solver):
                 blocks.setdefault((id(solver), bool(scene_loaded[k])), (solver, []))[1] \
                     .append(scene)
             else:
@@ -366,7 +372,7 @@ def solve_grid(designs, pressures, tip_forces=((0.0, 0.0),), settings=ModelSetti
         force = np.tile(forces, (n_p, 1))[local].reshape(index.size, 1, 2)
         tip = solvers[0].n_segments
         nodes = np.array([tip] if loaded else [], dtype=np.int64)
-        batch = engine.solve_batch(solvers, slots, pressure, nodes,
+        batch = engine.solve_batch([s.engine_problem for s in solvers], slots, pressure, nodes,
                                    force if loaded else force[:, :0], solvers[0]._options, tip)
         out._batches.append((batch, solvers, slots, loaded))
         out._batch[index] = len(out._batches) - 1
@@ -495,7 +501,7 @@ def rigidity_grid(designs, pressures, axis='x', displacement=0.010, settings=Mod
         for solver, choice, pressure in zip(solvers, choices, scene_p):
             scene = len(scenes)
             scenes.append((solver, pressure, choice))
-            if hasattr(solver, 'kernel_data'):
+            if _compiled(solver):
                 blocks.setdefault(id(solver), (solver, []))[1].append(scene)
             else:
                 _store_rigidity(out, scene, solver.rigidity(pressure, axis, delta), choice,
@@ -505,8 +511,9 @@ def rigidity_grid(designs, pressures, axis='x', displacement=0.010, settings=Mod
     k = 0 if axis == 'x' else 1
     for _, solvers, index, slots in groups:
         pressure = np.array([scenes[i][1] for i in index])
-        batch = engine.rigidity_batch(solvers, slots, pressure, solvers[0].n_segments,
-                                      AXES[axis], delta, solvers[0]._options)
+        batch = engine.rigidity_batch([s.engine_problem for s in solvers], slots, pressure,
+                                      solvers[0].n_segments, AXES[axis], delta,
+                                      solvers[0]._options)
         found = (batch.unloaded.status == int(SolverStatus.SUCCESS)) & np.isfinite(batch.force)
         lever = np.abs(batch.tips[:, 1 - k])
         for j, scene in enumerate(index):
@@ -550,6 +557,7 @@ def _rigidity_builder(solver, axis, delta, pressure, batch, j):
         out = engine.BorderedOutcome(batch.states[j], float(batch.force[j]),
                                      bool(np.isfinite(batch.force[j])),
                                      int(batch.iterations[j]), float(batch.fraction[j]),
-                                     bool(batch.stable[j]), float(batch.gradient[j]))
+                                     bool(batch.stable[j]), float(batch.gradient[j]),
+                                     batch.tips[j])
         return rigidity_result(solver, axis, delta, pressure, unloaded, out)
     return build

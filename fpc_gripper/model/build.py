@@ -45,14 +45,16 @@ def _outputs(result):
 def _engine_calls(solver, force):
     """Run the engine's Newton and sensitivity, and the discretisation's hooks, from Python."""
     from fpc_gripper.model import engine
-    from fpc_gripper.model.kernels import ccm as kernels
+    from fpc_gripper.model.kernels.chain import load_arrays
     tip_loads = getattr(solver, 'tip_loads', None)
     loads = tip_loads(force) if tip_loads else solver._loads(force, ())
+    problem = solver.engine_problem
     for load in ([], loads):
-        out = engine.solve(solver, 5.0e4, load, solver._options)
-        engine.newton(solver, out.x, 5.0e4, load, solver._options)
+        out = engine.solve(problem, 5.0e4, load, solver._options)
+        engine.newton(problem, out.x, 5.0e4, load, solver._options)
         if hasattr(solver, 'parameter_gradient'):
-            engine.sensitivity(solver, out.x, 5.0e4, load)
+            engine.sensitivity(problem, out.x, 5.0e4, load,
+                               solver.parameter_gradient(out.x, 5.0e4, load))
         # The interface the engine's loops take, called from Python (the interpreted loop
         # and the hooks' own tests do): the methods, then the compiled hooks themselves.
         x = out.x + 0.01
@@ -62,9 +64,11 @@ def _engine_calls(solver, force):
         solver.node_jacobian(x, loads[0][0])
         if hasattr(solver, 'solve_linear'):
             solver.solve_linear(hess, grad)
-        data = solver.kernel_data(bool(load))
+        problem.energy(x, 5.0e4, load)
+        problem.step(grad, problem.derivatives(x, 5.0e4, load)[2])
+        data = problem.data[bool(load)]
         hooks = engine.hooks_of(type(data))
-        nodes, forces = kernels.load_arrays(load)
+        nodes, forces = load_arrays(load)
         _, grad, hess = hooks['derivatives'](data, x, 5.0e4, nodes, forces)
         hooks['energy'](data, x, 5.0e4, nodes, forces)
         hooks['step'](data, grad, hess)
@@ -132,7 +136,7 @@ def _ladder():
         solver.rigidity(pressure=5.0e4, axis='z')
     # The rod's pointwise (eps, c1) problem of its outputs, energy included (the line
     # search of its Newton calls it only when a full step fails).
-    state = engine.solve(solver, 1.0e5, [], solver._options).x
+    state = engine.solve(solver.engine_problem, 1.0e5, [], solver._options).x
     _, kap, along, start = rod_kernels.sample_fields_kernel(
         state, solver._xq.size, *solver._sample_at[1:5], np.zeros(2))
     local = rod._PointwiseLocal(solver, kap, along, solver._sample_at[4], 1.0e5)

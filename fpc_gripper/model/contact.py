@@ -481,8 +481,8 @@ def solve_contact(solver, pressure, obstacles, tip_force=(0.0, 0.0),
         state = initial.state
     con = _contact_set(solver, points, obstacles, 0.0, settings.penalty)
     loads = solver.tip_loads(force)
-    outcome = engine.contact_solve(solver, pressure, loads, con, solver._options, state,
-                                   top=solver.design.max_pressure)
+    outcome = engine.contact_solve(solver.engine_problem, pressure, loads, con, solver._options,
+                                   state, top=solver.design.max_pressure)
     return ContactResult(solver, outcome, points, obstacles, con.params, pressure, force,
                          loads=loads)
 
@@ -561,13 +561,14 @@ def contact_path(solver, pressures, obstacles, shifts=None, mu=0.0, tip_force=(0
     con = _contact_set(solver, points, obstacles, mu, settings.penalty)
     x, lam, status = start.state
     # Sticking pairs stay tied where the start's step tied them.
-    anchors = engine.next_anchors(
-        solver, x, con._replace(params=ck.shifted_params(con.kind, con.params, base_shift),
-                                anchor=start.anchors), status)
+    shifted = con._replace(params=ck.shifted_params(con.kind, con.params, base_shift),
+                           anchor=start.anchors)
+    anchors = engine.next_anchors(solver.engine_problem, x, shifted, status)
     con = con._replace(anchor=anchors)
     loads = solver.tip_loads(force)
-    steps = engine.contact_path(solver, pressures[begin:], shifts[begin:], loads, con,
-                                solver._options, (x, lam, status, base_shift, start.pressure))
+    steps = engine.contact_path(solver.engine_problem, pressures[begin:], shifts[begin:], loads,
+                                con, solver._options,
+                                (x, lam, status, base_shift, start.pressure))
     for k, (outcome, params) in enumerate(steps):
         placed = tuple(translated(o, s) for o, s in zip(obstacles, shifts[begin + k]))
         results.append(ContactResult(solver, outcome, points, placed, params,

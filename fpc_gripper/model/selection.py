@@ -236,7 +236,7 @@ class _ArcFeature:
             return abs(float(self.table(pressure)))
         key = (pressure,) + tuple(tip_force)
         if key not in self._loaded:
-            out = engine.solve(self.arc, pressure, self.arc.tip_loads(tip_force),
+            out = engine.solve(self.arc.engine_problem, pressure, self.arc.tip_loads(tip_force),
                                self.arc._options, self._nearest(pressure))
             if len(self._loaded) >= _FEATURE_CACHE:
                 self._loaded.clear()
@@ -281,7 +281,7 @@ class _ArcFeature:
                 starts.append(start)
         if index:
             batch = engine.solve_batch(
-                [self.arc], np.zeros(len(index), dtype=np.int64),
+                [self.arc.engine_problem], np.zeros(len(index), dtype=np.int64),
                 [pressures[k] for k in index], [self.arc.tip_node],
                 np.array([tip_forces[k] for k in index], dtype=float).reshape(-1, 1, 2),
                 self.arc._options, self.arc.tip_node, initial=np.array(starts))

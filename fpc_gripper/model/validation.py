@@ -83,6 +83,9 @@ def real_number(name, value, unit):
         If it is NaN or infinite (an `ArgumentError`).
 
     """
+    # A Python float first: every solve checks its inputs, and this case is most of them.
+    if type(value) is float and math.isfinite(value):
+        return value
     if isinstance(value, (bool, np.bool_)) or not isinstance(
             value, (int, float, np.integer, np.floating)):
         raise TypeError(f'`{name}` must be a real number {unit}, got {brief(value)}')

@@ -210,6 +210,11 @@ def test_grid_bad_input_names_the_argument(call, exc, match):
 
 
 # -- the engine's batches ---------------------------------------------------------------------
+def _engine(solvers):
+    """What each solver hands the engine (an object without one: itself)."""
+    return [getattr(solver, 'engine_problem', solver) for solver in solvers]
+
+
 def _problems():
     """CCM8 of two designs, paper and consistent: one type, size and options."""
     return [CCMSolver(ActuatorDesign.paper(0.15), 8, max_iterations=8),
@@ -223,13 +228,13 @@ def _check_batch_scenes(problems, design, pressures, forces, tip):
     nodes = [tip] if forces is not None else []
     batch_forces = (np.asarray(forces, dtype=float).reshape(len(design), 1, 2)
                     if forces is not None else np.zeros((len(design), 0, 2)))
-    out = engine.solve_batch(problems, design, pressures, nodes, batch_forces,
+    out = engine.solve_batch(_engine(problems), design, pressures, nodes, batch_forces,
                              problems[0]._options, tip)
     statuses = []
     for i, (d, pressure) in enumerate(zip(design, pressures)):
         problem = problems[d]
         loads = [(tip, np.array(forces[i], dtype=float))] if forces is not None else []
-        single = engine.solve(problem, pressure, loads, problem._options)
+        single = engine.solve(problem.engine_problem, pressure, loads, problem._options)
         assert out.status[i] == int(single.status), i
         assert out.iterations[i] == single.iterations, i
         assert out.fraction[i] == single.fraction, i          # a dyadic fraction
@@ -255,7 +260,7 @@ def test_solve_batch_equals_single_solves_through_continuation_and_failure():
     assert SolverStatus.CONTINUATION_FAILED in statuses
     assert statuses.count(SolverStatus.SUCCESS) == len(statuses) - 1
     # The continuation scenes: Newton from flat alone fails there.
-    cold = engine.newton(problems[0], problems[0].flat(), 0.0,
+    cold = engine.newton(problems[0].engine_problem, problems[0].flat(), 0.0,
                          [(8, np.array([-30.0, 0.0]))], problems[0]._options)
     assert cold.status is SolverStatus.MAX_ITERATIONS
     # Unloaded scenes take the block-Hessian discretisation.
@@ -279,12 +284,12 @@ def test_rigidity_batch_equals_single_rigidity(axis):
     direction = {'x': np.array([1.0, 0.0]), 'z': np.array([0.0, 1.0])}[axis]
     design = [2, 0, 1, 2]
     pressures = [0.0, 100e3, 200e3, 55.2e3]
-    out = engine.rigidity_batch(problems, design, pressures, 8, direction, 0.010,
+    out = engine.rigidity_batch(_engine(problems), design, pressures, 8, direction, 0.010,
                                 problems[0]._options)
     for i, (d, pressure) in enumerate(zip(design, pressures)):
         problem = problems[d]
-        free = engine.solve(problem, pressure, [], problem._options)
-        single = engine.rigidity(problem, free.x, pressure, 8, direction, 0.010,
+        free = engine.solve(problem.engine_problem, pressure, [], problem._options)
+        single = engine.rigidity(problem.engine_problem, free.x, pressure, 8, direction, 0.010,
                                  problem._options)
         assert out.unloaded.status[i] == int(free.status)
         assert out.unloaded.iterations[i] == free.iterations
@@ -307,14 +312,15 @@ def test_engine_batches_reject_bad_indices(design, pressures, match):
     problems = _problems()[:2]
     forces = np.zeros((len(np.ravel(pressures)), 1, 2))
     with pytest.raises(ValueError, match=match):
-        engine.solve_batch(problems, design, pressures, [8], forces, problems[0]._options, 8)
+        engine.solve_batch(_engine(problems), design, pressures, [8], forces,
+                           problems[0]._options, 8)
     with pytest.raises(ValueError, match=match):
-        engine.rigidity_batch(problems, design, pressures, 8, [1.0, 0.0], 0.01,
+        engine.rigidity_batch(_engine(problems), design, pressures, 8, [1.0, 0.0], 0.01,
                               problems[0]._options)
 
 
 class _NotCompiled:
-    """A discretisation without `kernel_data`: the engine can run it, a batch cannot."""
+    """A discretisation that runs interpreted: the engine can run it, a batch cannot."""
 
     def __init__(self, solver):
         self.gradient_scale = solver.gradient_scale
@@ -326,8 +332,8 @@ class _NotCompiled:
     (lambda d: [CCMSolver(d, 22), PCCSolver(d, 22)], ValueError, '`problems` must share'),
     # A narrower channel: another gradient scale, so other packed options.
     (lambda d: [CCMSolver(d, 8), CCMSolver(d.replace(Cy=0.024), 8)], ValueError, 'options'),
-    (lambda d: [CCMSolver(d, 8), _NotCompiled(CCMSolver(d, 8))], TypeError, 'kernel_data'),
-    (lambda d: [], TypeError, 'kernel_data'),
+    (lambda d: [CCMSolver(d, 8), _NotCompiled(CCMSolver(d, 8))], TypeError, 'CompiledProblem'),
+    (lambda d: [], TypeError, 'CompiledProblem'),
 ])
 def test_engine_batches_reject_mixed_problems(make, exc, match):
     problems = make(ActuatorDesign.paper(0.25))
@@ -336,10 +342,11 @@ def test_engine_batches_reject_mixed_problems(make, exc, match):
     design = [0, len(problems) - 1] if problems else []
     pressures = [0.0] * len(design)
     with pytest.raises(exc, match=match):
-        engine.solve_batch(problems, design, pressures, [], np.zeros((len(design), 0, 2)),
-                           options, 8)
+        engine.solve_batch(_engine(problems), design, pressures, [],
+                           np.zeros((len(design), 0, 2)), options, 8)
     with pytest.raises(exc, match=match):
-        engine.rigidity_batch(problems, design, pressures, 8, [1.0, 0.0], 0.01, options)
+        engine.rigidity_batch(_engine(problems), design, pressures, 8, [1.0, 0.0], 0.01,
+                              options)
 
 
 @pytest.mark.parametrize('rung, n, label', [

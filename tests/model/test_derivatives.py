@@ -6,7 +6,8 @@ from scipy.optimize._numdiff import approx_derivative
 
 from fpc_gripper.model import ActuatorDesign, CCMSolver
 from fpc_gripper.model.analysis import fit_circle
-from fpc_gripper.model.kernels.ccm import load_derivatives, segment_derivatives
+from fpc_gripper.model.kernels.ccm import segment_derivatives
+from fpc_gripper.model.kernels.chain import load_derivatives
 
 
 def _assembled(solver, pressure, loads):

@@ -12,8 +12,7 @@ import pytest
 from fpc_gripper.model import ActuatorDesign, CCMSolver, compiled, engine
 from fpc_gripper.model.discretisations.pcc import PCCSolver
 from fpc_gripper.model.engine import SolverStatus
-from fpc_gripper.model.kernels import ccm as kernels
-from fpc_gripper.model.kernels import pcc as pcc_kernels
+from fpc_gripper.model.kernels import chain, linear
 
 #: Compiled against interpreted: the same loop over the same kernels. The Newton steps
 #: come out bitwise equal or nearly (seen <= 3e-14 on a failed continuation's last
@@ -27,7 +26,7 @@ MODEL = pathlib.Path(engine.__file__).resolve().parents[1]
 
 class Interpreted:
     """
-    A discretisation without `kernel_data`: the engine runs its loops in Python on it.
+    A discretisation that is not a `CompiledProblem`: the engine runs its loops in Python.
 
     Every hook forwards to the wrapped solver's methods, so the physics is the solver's
     and only the loop's execution differs.
@@ -67,7 +66,7 @@ def _loads(solver, force):
 
 
 def _cold_newton_fails(solver, pressure, loads):
-    out = engine.newton(solver, solver.flat(), pressure, loads, solver._options)
+    out = engine.newton(solver.engine_problem, solver.flat(), pressure, loads, solver._options)
     return out.status not in (SolverStatus.SUCCESS, SolverStatus.UNSTABLE)
 
 
@@ -109,7 +108,7 @@ def test_compiled_and_interpreted_loops_agree(name):
     solver = make()
     loads = _loads(solver, force)
     python = Interpreted(solver)
-    compiled = engine.solve(solver, pressure, loads, solver._options)
+    compiled = engine.solve(solver.engine_problem, pressure, loads, solver._options)
     interpreted = engine.solve(python, pressure, loads, solver._options)
     assert python.calls > 0                        # the wrapper really ran the loop
     # The scene goes where it was picked to go.
@@ -141,10 +140,10 @@ def test_compiled_and_interpreted_loops_agree(name):
 def test_compiled_and_interpreted_rigidity_agree(make, axis):
     solver = make()
     direction = {'x': np.array([1.0, 0.0]), 'z': np.array([0.0, 1.0])}[axis]
-    free = engine.solve(solver, 30e3, [], solver._options)
+    free = engine.solve(solver.engine_problem, 30e3, [], solver._options)
     assert free.status is SolverStatus.SUCCESS
     python = Interpreted(solver)
-    compiled = engine.rigidity(solver, free.x, 30e3, _tip(solver), direction, 0.010,
+    compiled = engine.rigidity(solver.engine_problem, free.x, 30e3, _tip(solver), direction, 0.010,
                                solver._options)
     interpreted = engine.rigidity(python, free.x, 30e3, _tip(solver), direction, 0.010,
                                   solver._options)
@@ -162,20 +161,27 @@ def test_compiled_and_interpreted_rigidity_agree(make, axis):
         assert abs(moved - 0.010) <= 1e-9 * 0.010
 
 
-def test_a_solver_with_kernel_data_runs_compiled():
+def test_a_compiled_problem_never_calls_back_into_its_solver():
     # The compiled path never calls the solver's Python hooks: make them fail.
     solver = CCMSolver(ActuatorDesign.paper(0.25), 8)
-    reference = engine.solve(solver, 80e3, _loads(solver, (0.2, 0.1)), solver._options)
+    problem = solver.engine_problem
+    loads = _loads(solver, (0.2, 0.1))
+    reference = engine.solve(problem, 80e3, loads, solver._options)
+    rates = np.ones((2,) + reference.x.shape)
+    before = engine.sensitivity(problem, reference.x, 80e3, loads, rates)[0]
 
     def broken(*args):
         raise AssertionError('the Python hook was called')
-    for name in ('derivatives', 'energy', 'step', 'solve_linear', 'node_jacobian'):
+    for name in ('derivatives', 'energy', 'step', 'solve_linear', 'node_jacobian', 'flat'):
         setattr(solver, name, broken)
-    again = engine.solve(solver, 80e3, _loads(solver, (0.2, 0.1)), solver._options)
+    assert not any(value is solver for value in vars(problem).values())
+    again = engine.solve(problem, 80e3, loads, solver._options)
     assert again.iterations == reference.iterations
     assert deviation(again.x, reference.x) <= RTOL
-    free = engine.solve(solver, 80e3, [], solver._options)
-    assert engine.rigidity(solver, free.x, 80e3, 8, np.array([1.0, 0.0]), 0.01,
+    after = engine.sensitivity(problem, reference.x, 80e3, loads, rates)[0]
+    assert deviation(after, before) <= RTOL
+    free = engine.solve(problem, 80e3, [], solver._options)
+    assert engine.rigidity(problem, free.x, 80e3, 8, np.array([1.0, 0.0]), 0.01,
                            solver._options).success
     with pytest.raises(AssertionError, match='Python hook'):
         engine.solve(Interpreted(solver), 80e3, [], solver._options)
@@ -186,9 +192,9 @@ def _hook_arguments(solver, data, loaded):
     """(x, pressure, nodes, forces) of a converged loaded or unloaded state of `solver`."""
     force = (0.3, -0.2) if loaded else (0.0, 0.0)
     loads = _loads(solver, force)
-    out = engine.solve(solver, 100e3, loads, solver._options)
+    out = engine.solve(solver.engine_problem, 100e3, loads, solver._options)
     assert out.status is SolverStatus.SUCCESS
-    nodes, forces = kernels.load_arrays(loads)
+    nodes, forces = chain.load_arrays(loads)
     x = out.x + 0.01                      # off the equilibrium: a gradient worth solving
     return x, 100e3, nodes, forces
 
@@ -198,7 +204,7 @@ def _hook_arguments(solver, data, loaded):
 def test_every_hook_is_a_compiled_kernel(kind, loaded):
     design = ActuatorDesign.paper(0.25)
     solver = PCCSolver(design, 22) if kind == 'PCCData' else CCMSolver(design, 8)
-    data = solver.kernel_data(loaded)
+    data = solver.engine_problem.data[loaded]
     assert type(data).__name__ == kind
     hooks = engine.hooks_of(type(data))
     base = ['derivatives', 'energy', 'node_jacobian', 'solve_linear', 'step']
@@ -218,7 +224,7 @@ def test_every_hook_is_a_compiled_kernel(kind, loaded):
         assert data.dense is True and hess[0].shape == (1, 32, 32)
         dense = hess[0][0]
     else:
-        dense = pcc_kernels._dense_from_band(hess[0])
+        dense = linear._dense_from_band(hess[0])
     assert np.linalg.eigvalsh(dense).min() > 0.0          # the Cholesky paths
     step, min_eig = hooks['step'](data, grad, hess)
     assert min_eig == 1.0
@@ -252,10 +258,10 @@ def test_every_hook_is_a_compiled_kernel(kind, loaded):
         assert isinstance(hook, numba.core.registry.CPUDispatcher), name
         assert hook.signatures and hook.targetoptions['nopython'], name
     # The engine's entries compiled for this namedtuple type.
-    engine.solve(solver, 50e3, _loads(solver, (0.1, 0.0) if loaded else (0.0, 0.0)),
+    engine.solve(solver.engine_problem, 50e3, _loads(solver, (0.1, 0.0) if loaded else (0.0, 0.0)),
                  solver._options)
     signatures = engine.solves._solve_entry.signatures
-    types = {getattr(sig[0], 'instance_class', None) for sig in signatures}
+    types = {getattr(sig[0].item_type, 'instance_class', None) for sig in signatures}
     assert type(data) in types
 
 
@@ -319,12 +325,12 @@ def test_dense_hook_factor_is_the_cholesky_factor_of_its_hessian():
     # The compiled loop steps and solves with the factor the dense hook returns; the
     # Python hooks never see it. It must factor H where H is definite, and say so.
     solver = _consistent_solver()
-    data = solver.kernel_data(True)
+    data = solver.engine_problem.data[True]
     n = solver.n_segments
     rng = np.random.default_rng(5)
     seen = set()
     for force, scale in (((0.3, -0.2), 0.05), ((-40.0, 0.0), 0.05), ((0.5, 0.5), 0.4)):
-        nodes, forces = kernels.load_arrays(solver._loads(force, []))
+        nodes, forces = chain.load_arrays(solver._loads(force, []))
         for _ in range(3):
             q = rng.normal(scale=scale, size=(n, 4))
             _, _, (matrix, low, definite) = engine.hooks_of(type(data))['derivatives'](
@@ -340,8 +346,7 @@ def test_dense_hook_factor_is_the_cholesky_factor_of_its_hessian():
 
 
 # -- the disk cache and warm starts ---------------------------------------------------------
-ENTRIES = ('_newton_entry', '_solve_entry', '_rigidity_entry', '_contact_entry',
-           '_solve_batch_entry', '_rigidity_batch_entry')
+ENTRIES = ('_solve_entry', '_rigidity_entry', '_contact_entry')
 
 
 @pytest.mark.parametrize('entry', ENTRIES)
@@ -375,7 +380,7 @@ def test_cache_index_goes_stale_when_a_kernel_source_changes():
     # numba compares the stamp stored in the index with the dispatcher's: the build's
     # entries load, and an index read under another stamp (an edited source) is empty.
     solver = CCMSolver(ActuatorDesign.paper(0.25), 8)
-    engine.solve(solver, 10e3, [], solver._options)
+    engine.solve(solver.engine_problem, 10e3, [], solver._options)
     cache_file = engine.solves._solve_entry._cache._cache_file
     assert cache_file._load_index()                       # built: entries found
     stale = copy.copy(cache_file)
@@ -402,14 +407,14 @@ def test_warm_start_never_changes_the_answer(name):
     make, pressure, force, history = WARM_CASES[name]
     solver = make()
     loads = _loads(solver, force)
-    cold = engine.solve(solver, pressure, loads, solver._options)
+    cold = engine.solve(solver.engine_problem, pressure, loads, solver._options)
     assert cold.status is SolverStatus.SUCCESS
     tip = solver.node_jacobian(cold.x, _tip(solver))[0]
-    starts = [engine.solve(solver, p, _loads(solver, f), solver._options).x
+    starts = [engine.solve(solver.engine_problem, p, _loads(solver, f), solver._options).x
               for p, f in history]
     spent = set()
     for start in starts:
-        warm = engine.solve(solver, pressure, loads, solver._options, initial=start)
+        warm = engine.solve(solver.engine_problem, pressure, loads, solver._options, initial=start)
         assert warm.status is cold.status
         assert deviation(solver.node_jacobian(warm.x, _tip(solver))[0], tip) <= WARM_RTOL
         spent.add(warm.iterations)
@@ -417,9 +422,9 @@ def test_warm_start_never_changes_the_answer(name):
     # A start Newton cannot converge from: the solve begins again from flat, and spends
     # the warm attempt's iterations on top of the cold ones.
     bad = solver.flat() + 5.0
-    attempt = engine.newton(solver, bad, pressure, loads, solver._options)
+    attempt = engine.newton(solver.engine_problem, bad, pressure, loads, solver._options)
     assert attempt.status is not SolverStatus.SUCCESS
-    fallback = engine.solve(solver, pressure, loads, solver._options, initial=bad)
+    fallback = engine.solve(solver.engine_problem, pressure, loads, solver._options, initial=bad)
     assert fallback.status is cold.status
     assert fallback.iterations == attempt.iterations + cold.iterations
     # From flat again: the cold solve's arithmetic (round-off apart, see RTOL).
@@ -430,7 +435,7 @@ def test_register_names_a_missing_or_unknown_hook():
     import collections
     fake = collections.namedtuple('FakeData', ('a',))
     hooks = dict(engine.hooks_of(type(CCMSolver(ActuatorDesign.paper(0.25), 4)
-                                      .kernel_data(False))))
+                                      .engine_problem.data[False])))
     del hooks['energy']
     with pytest.raises(ValueError, match=r"FakeData.*missing \['energy'\], unknown \[\]"):
         engine.register(fake, hooks)

@@ -7,7 +7,7 @@ import pytest
 from scipy.optimize._numdiff import approx_derivative
 
 from fpc_gripper.model import ActuatorDesign, CCMSolver
-from fpc_gripper.model.kernels import ccm as kernels
+from fpc_gripper.model.kernels import ccm as kernels, chain, linear
 from fpc_gripper.model.selection import aligned_edges
 
 #: Kernels against the originals: the same formulas in the same order leave round-off
@@ -70,13 +70,14 @@ def test_kernels_run_compiled():
     solver = _solver(0.25, 3, False, 0.05)
     q = solver.solve(1e5).q
     kernels.segment_derivatives(q, solver.segments, *_params(solver, 1e5))
-    kernels.load_derivatives(q, solver.segments.lengths, [(3, np.array([0.1, 0.2]))])
-    kernels.newton_step(np.ones((3, 4)), np.tile(np.eye(4), (3, 1, 1)))
-    kernels.newton_step(np.ones((3, 4)), np.eye(12))
-    kernels.node_positions(q, solver.segments.lengths)
-    for name in ('segment_derivatives_kernel', 'load_derivatives_kernel', 'newton_step_blocks',
-                 'newton_step_dense', 'node_positions_kernel'):
-        kernel = getattr(kernels, name)
+    chain.load_derivatives(q, solver.segments.lengths, [(3, np.array([0.1, 0.2]))])
+    linear.newton_step(np.ones((3, 4)), np.tile(np.eye(4), (3, 1, 1)))
+    linear.newton_step(np.ones((3, 4)), np.eye(12))
+    chain.node_positions(q, solver.segments.lengths)
+    for module, name in ((kernels, 'segment_derivatives_kernel'),
+                         (chain, 'load_derivatives_kernel'), (linear, 'newton_step_blocks'),
+                         (linear, 'newton_step_dense'), (chain, 'node_positions_kernel')):
+        kernel = getattr(module, name)
         assert kernel.signatures and kernel.targetoptions['nopython'], name
 
 
@@ -95,21 +96,21 @@ def test_segment_kernels_equal_numpy(states):
 def test_load_kernels_equal_numpy(states):
     for solver, q, _, loads in states:
         lengths = solver.segments.lengths
-        compiled = kernels.load_derivatives(q, lengths, loads)
+        compiled = chain.load_derivatives(q, lengths, loads)
         original = reference.load_derivatives(q, lengths, loads)
         assert isinstance(compiled[0], float) and isinstance(original[0], float)
         if not loads:
-            assert compiled[0] == 0.0 and kernels.load_energy(q, lengths, loads) == 0.0
+            assert compiled[0] == 0.0 and chain.load_energy(q, lengths, loads) == 0.0
             assert not compiled[1].any() and not compiled[2].any()
             assert compiled[2].shape == original[2].shape
-            direct = kernels.load_derivatives_kernel(q, lengths, *kernels.load_arrays(loads))
+            direct = chain.load_derivatives_kernel(q, lengths, *chain.load_arrays(loads))
             assert direct[0] == 0.0 and not direct[1].any() and not direct[2].any()
             assert direct[2].shape == original[2].shape
             continue
         # The energy scale: each load's |F| times the finger length.
         scale = sum(np.abs(f).sum() for _, f in loads) * lengths.sum()
         assert abs(compiled[0] - original[0]) <= RTOL * scale
-        assert abs(kernels.load_energy(q, lengths, loads)
+        assert abs(chain.load_energy(q, lengths, loads)
                    - reference.load_energy(q, lengths, loads)) <= RTOL * scale
         assert deviation(compiled[1], original[1]) <= RTOL
         assert deviation(compiled[2], original[2]) <= RTOL
@@ -118,11 +119,11 @@ def test_load_kernels_equal_numpy(states):
 def test_kinematics_kernels_equal_numpy(states):
     for solver, q, _, _ in states:
         lengths = solver.segments.lengths
-        for got, want in zip(kernels.node_positions(q, lengths),
+        for got, want in zip(chain.node_positions(q, lengths),
                              reference.node_positions(q, lengths)):
             assert deviation(got, want, max(np.abs(want).max(), 1e-3)) <= RTOL
-        assert deviation(kernels.end_rotation(q), reference.end_rotation(q), 1.0) <= RTOL
-        for got, want in zip(kernels.consistent_strain_map(q),
+        assert deviation(chain.end_rotation(q), reference.end_rotation(q), 1.0) <= RTOL
+        for got, want in zip(chain.consistent_strain_map(q),
                              reference.consistent_strain_map(q)):
             assert deviation(got, want) <= RTOL
 
@@ -138,7 +139,7 @@ def _mirrored(hess):
 
 def _check_step(solver, grad, hess):
     """Compare the compiled step with the solver's; return whether H was PD."""
-    step, min_eig = kernels.newton_step(grad, hess)
+    step, min_eig = linear.newton_step(grad, hess)
     want, want_eig = reference.newton_step(grad, hess)
     matrix, kappa, lowest = _mirrored(hess)
     if want_eig == 1.0:
@@ -177,13 +178,13 @@ def _compiled_total(solver, pressure, loads):
 
     def total(x):
         q = x.reshape(n, 4)
-        return kernels.segment_energy(q, seg, *params).sum() + kernels.load_energy(
+        return kernels.segment_energy(q, seg, *params).sum() + chain.load_energy(
             q, lengths, loads)
 
     def derivatives(x):
         q = x.reshape(n, 4)
         _, g, blocks = kernels.segment_derivatives(q, seg, *params)
-        _, g_load, hess = kernels.load_derivatives(q, lengths, loads)
+        _, g_load, hess = chain.load_derivatives(q, lengths, loads)
         for i in range(n):
             hess[4 * i:4 * i + 4, 4 * i:4 * i + 4] += blocks[i]
         return (g + g_load).ravel(), hess
@@ -211,12 +212,12 @@ def test_compiled_load_derivatives_match_finite_differences(states):
     for solver, q, _, loads in states[3::4]:
         n, lengths = solver.n_segments, solver.segments.lengths
         x = q.ravel()
-        _, grad, hess = kernels.load_derivatives(q, lengths, loads)
+        _, grad, hess = chain.load_derivatives(q, lengths, loads)
         g_fd = approx_derivative(
-            lambda y: kernels.load_energy(y.reshape(n, 4), lengths, loads), x,
+            lambda y: chain.load_energy(y.reshape(n, 4), lengths, loads), x,
             method='3-point', abs_step=1e-6)
         h_fd = approx_derivative(
-            lambda y: kernels.load_derivatives(y.reshape(n, 4), lengths, loads)[1].ravel(), x,
+            lambda y: chain.load_derivatives(y.reshape(n, 4), lengths, loads)[1].ravel(), x,
             method='3-point', abs_step=1e-6)
         # One segment's load Hessian is zero: p_0 is linear in q_0 and theta_0 = 0.
         scale = max(np.abs(hess).max(), np.abs(grad).max())
@@ -227,17 +228,17 @@ def test_compiled_load_derivatives_match_finite_differences(states):
 def test_compiled_strain_map_derivatives_match_finite_differences(states):
     for _, q, _, _ in states[1::2]:
         n = q.shape[0]
-        qs, jac, hess3 = kernels.consistent_strain_map(q)
+        qs, jac, hess3 = chain.consistent_strain_map(q)
         for i in range(n):
             def row(x, i=i):
                 q_i = q.copy()
                 q_i[i] = x
-                return kernels.consistent_strain_map(q_i)[0][i]
+                return chain.consistent_strain_map(q_i)[0][i]
 
             def row_jac(x, i=i):
                 q_i = q.copy()
                 q_i[i] = x
-                return kernels.consistent_strain_map(q_i)[1][i, 3]
+                return chain.consistent_strain_map(q_i)[1][i, 3]
 
             j_fd = approx_derivative(row, q[i], method='3-point', abs_step=1e-7)
             h_fd = approx_derivative(row_jac, q[i], method='3-point', abs_step=1e-7)
@@ -250,12 +251,12 @@ def test_node_jacobian_is_the_derivative_of_the_node_position(states):
     for solver, q, _, _ in states[::3]:
         lengths = solver.segments.lengths
         for node in sorted({solver.n_segments, max(1, solver.n_segments // 2)}):
-            position, jac = kernels.node_jacobian(q, lengths, node)
-            np.testing.assert_allclose(position, kernels.node_positions(q, lengths)[0][node],
+            position, jac = chain.node_jacobian(q, lengths, node)
+            np.testing.assert_allclose(position, chain.node_positions(q, lengths)[0][node],
                                        rtol=0, atol=1e-15)
 
             def at(x, node=node):
-                return kernels.node_positions(x.reshape(q.shape), lengths)[0][node]
+                return chain.node_positions(x.reshape(q.shape), lengths)[0][node]
             numeric = approx_derivative(at, q.ravel(), method='3-point')
             scale = np.abs(jac).max()
             assert np.abs(jac.reshape(2, -1) - numeric).max() <= 1e-7 * scale

@@ -7,7 +7,7 @@ import pytest
 
 from fpc_gripper.model import ActuatorDesign
 from fpc_gripper.model.discretisations.pcc import half_angle_sinc, PCCSolver
-from fpc_gripper.model.kernels import pcc as pcc_kernels
+from fpc_gripper.model.kernels import linear, pcc as pcc_kernels, pcc_section, shapes
 
 #: Kernels against the reference: the same formulas, in the same order but for dot
 #: products and einsum, leave round-off only (seen <= 1.9e-15), relative to the largest
@@ -61,23 +61,25 @@ def test_kernels_run_compiled():
     x = solver._pack(result.state)
     _, grad, hess = solver.derivatives(x, 1e5, [(24, np.array([0.0, 0.5]))])
     solver.energy(x, 1e5, [])
-    data = solver.kernel_data(True)
+    data = solver.engine_problem.data[True]
     pcc_kernels.energy_kernel(x, data.lengths, data.stiffness, data.gas, data.pemc, 1e5,
                               *solver._load_arrays([]))
     pcc_kernels.derivatives_kernel(x, data.lengths, data.stiffness, data.gas, data.pemc, 1e5,
                                    *solver._load_arrays([]))
     solver.solve_linear(hess, grad)
     solver.step(grad, hess)
-    pcc_kernels.banded_cholesky(hess.lower)
-    pcc_kernels.newton_step_kernel(hess.lower, grad)
+    linear.banded_cholesky(hess.lower)
+    linear.banded_step(hess.lower, grad)
     solver.node_jacobian(x, 24)
     solver.nodes(x)
     half_angle_sinc(np.array([0.5]))
-    for name in ('half_angle_sinc_kernel', 'energy_kernel', 'derivatives_kernel',
-                 'banded_cholesky', 'cholesky_solve', 'newton_step_kernel', 'nodes_kernel',
-                 'node_jacobian_kernel', 'outputs_kernel', 'pcc_derivatives', 'pcc_energy',
-                 'pcc_solve_linear'):
-        kernel = getattr(pcc_kernels, name)
+    for module, name in ((pcc_section, 'half_angle_sinc_kernel'), (pcc_kernels, 'energy_kernel'),
+                         (pcc_kernels, 'derivatives_kernel'), (linear, 'banded_cholesky'),
+                         (linear, 'cholesky_solve'), (linear, 'banded_step'),
+                         (pcc_kernels, 'nodes_kernel'), (pcc_kernels, 'node_jacobian_kernel'),
+                         (shapes, 'outputs_kernel'), (pcc_kernels, 'pcc_derivatives'),
+                         (pcc_kernels, 'pcc_energy'), (pcc_kernels, 'pcc_solve_linear')):
+        kernel = getattr(module, name)
         assert kernel.signatures and kernel.targetoptions['nopython'], name
 
 

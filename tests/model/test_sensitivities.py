@@ -71,7 +71,8 @@ def test_parameter_gradient_is_exact(loaded):
 
 def test_equilibrium_sensitivities_are_exact(loaded):
     solver, x, loads, force = loaded
-    dx, dforce = engine.sensitivity(solver, x, 120e3, loads)
+    dx, dforce = engine.sensitivity(solver.engine_problem, x, 120e3, loads,
+                                    solver.parameter_gradient(x, 120e3, loads))
     assert dforce is None
     for k in range(len(SECTION_PARAMETERS)):
         fd = _fd(lambda d: (lambda s: s.unknowns(s.solve(120e3, force)))(PCCSolver(d, 22)), k)
@@ -84,12 +85,14 @@ def test_displacement_controlled_force_sensitivities_are_exact(axis):
     solver = PCCSolver(DESIGN, n_segments=22)
     rigidity = solver.rigidity(40e3, axis)
     free = solver.unknowns(rigidity.unloaded)
-    dfree = engine.sensitivity(solver, free, 40e3, [])[0]
+    dfree = engine.sensitivity(solver.engine_problem, free, 40e3, [],
+                               solver.parameter_gradient(free, 40e3, []))[0]
     direction = {'x': np.array([1.0, 0.0]), 'z': np.array([0.0, 1.0])}[axis]
     rate = dfree @ (direction @ solver.node_jacobian(free, solver.tip_node)[1])
     loaded = solver.unknowns(rigidity.loaded)
-    dx, dforce = engine.sensitivity(solver, loaded, 40e3,
-                                    [(solver.tip_node, rigidity.force * direction)],
+    loads = [(solver.tip_node, rigidity.force * direction)]
+    dx, dforce = engine.sensitivity(solver.engine_problem, loaded, 40e3, loads,
+                                    solver.parameter_gradient(loaded, 40e3, loads),
                                     control=(solver.tip_node, direction, rate))
     for k in range(len(SECTION_PARAMETERS)):
         fd = _fd(lambda d: np.array(PCCSolver(d, 22).rigidity(40e3, axis).force), k)

@@ -3,10 +3,10 @@
 import numpy as np
 
 from .rung import ArcResult, RungSolver, set_common
-from ..engine import linear_solve, NewtonOptions, register
+from ..engine import CompiledProblem, linear_solve, NewtonOptions, register
 from ..kernels import arc as arc_kernels
-from ..kernels.ccm import load_arrays
-from ..kernels.pcc import half_angle_sinc_kernel, section_arrays
+from ..kernels.chain import load_arrays
+from ..kernels.pcc_section import half_angle_sinc_kernel, section_arrays
 from ..section.law import station_layout
 
 __all__ = ['ArcSolver']
@@ -68,6 +68,9 @@ class ArcSolver(RungSolver):
         self._data = arc_kernels.ArcData(*section_arrays(self.law, np.zeros(1, dtype=int)),
                                          float(self.pressure_coefficient), float(self.length),
                                          self._scale, _ARC_T, _ARC_W)
+        #: What the engine runs: the compiled data, never this object.
+        self.engine_problem = CompiledProblem(self._data, self._data, self.flat(),
+                                              self.gradient_scale)
 
     def _compatible(self, other):
         return isinstance(other, ArcSolver)
@@ -81,10 +84,6 @@ class ArcSolver(RungSolver):
 
     def _unpack(self, x):
         return x / self._scale
-
-    def kernel_data(self, loaded):
-        """Return the compiled discretisation the engine runs (`arc_kernels.ArcData`)."""
-        return self._data
 
     def derivatives(self, x, pressure, loads):
         """Energy [J], gradient and Hessian in the scaled unknowns (eps, kappa L, c1)."""

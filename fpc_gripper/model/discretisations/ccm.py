@@ -12,7 +12,7 @@ from ..analysis import CircleFitted, flexural_rigidity
 from ..design import ActuatorDesign
 from ..engine import linear_solve, linear_step, NewtonOptions, SolverStatus
 from ..kernels import ccm as kernels
-from ..kernels.ccm import node_jacobian
+from ..kernels.chain import load_arrays, node_jacobian
 from ..section.segments import build_segments, uniform_edges
 from ..validation import (arc_lengths, check_force, check_load, check_pressure_model,
                           PRESSURE_MODELS, real_number, warm_start_allowed)
@@ -363,11 +363,14 @@ class CCMSolver:
                                                self.pressure_coefficient,
                                                reconstruction == 'consistent', loaded)
                       for loaded in (False, True)}
+        #: What the engine runs: the compiled data, never this object.
+        self.engine_problem = engine.CompiledProblem(self._data[False], self._data[True],
+                                                     self.flat(), self.gradient_scale)
 
     # -- energy -----------------------------------------------------------
     def _total_energy(self, q, pressure, loads):
         return kernels.ccm_energy(self._data[False], np.ascontiguousarray(q, dtype=float),
-                                  float(pressure), *kernels.load_arrays(loads))
+                                  float(pressure), *load_arrays(loads))
 
     def _loads(self, tip_force, point_loads):
         """Convert the tip force and (s, fx, fz) point loads to (node index, force) pairs."""
@@ -404,7 +407,7 @@ class CCMSolver:
         data = self._data[bool(loads)]
         energy, grad, hess = kernels.ccm_derivatives(
             data, np.ascontiguousarray(q, dtype=float), float(pressure),
-            *kernels.load_arrays(loads))
+            *load_arrays(loads))
         return energy, grad, hess[0][0] if loads else hess[0]
 
     def step(self, grad, hess):
@@ -412,10 +415,6 @@ class CCMSolver:
         return linear_step(grad, hess)
 
     solve_linear = staticmethod(linear_solve)
-
-    def kernel_data(self, loaded):
-        """Return the compiled discretisation the engine runs (`kernels.ccm_data`)."""
-        return self._data[bool(loaded)]
 
     def node_jacobian(self, q, node):
         """Position of a node [m] and its derivatives in the scaled unknowns, (2, N, 4)."""
@@ -490,7 +489,7 @@ class CCMSolver:
         start = self._initial_state(initial)
         if not warm_start_allowed(sum(math.hypot(*force) for _, force in loads)):
             start = None
-        out = engine.solve(self, pressure, loads, self._options, start)
+        out = engine.solve(self.engine_problem, pressure, loads, self._options, start)
         return self._result(out.x, out.status, out.iterations, out.gradient, out.step,
                             out.min_eig, out.fraction, pressure, loads, tip_force)
 
@@ -535,8 +534,8 @@ class CCMSolver:
         unloaded = self.solve(pressure, (0.0, 0.0), initial=initial)
         if not unloaded.success:
             return rigidity_result(self, axis, delta, pressure, unloaded)
-        out = engine.rigidity(self, unloaded.q, pressure, self.n_segments, AXES[axis], delta,
-                              self._options)
+        out = engine.rigidity(self.engine_problem, unloaded.q, pressure, self.n_segments,
+                              AXES[axis], delta, self._options)
         return rigidity_result(self, axis, delta, pressure, unloaded, out)
 
 
@@ -592,5 +591,6 @@ def rigidity_result(solver, axis, delta, pressure, unloaded, out=None):
                             math.nan, 1.0, pressure, loads, tuple(force))
     message = 'converged' + ('' if out.stable else
                              ' (loaded state is unstable under force control)')
-    return RigidityResult(axis, delta, out.force, abs(loaded.tip[1 - k]), True, message,
+    # The lever is the loaded node's position that the displacement control constrains.
+    return RigidityResult(axis, delta, out.force, abs(float(out.tip[1 - k])), True, message,
                           unloaded, loaded, iterations)

@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from ..kernels import ccm as kernels, shapes as shape_kernels
+from ..kernels import chain, shapes as shape_kernels
 
 __all__ = ['to_scaled', 'from_scaled', 'end_rotation', 'node_positions', 'midplane_samples',
            'material_positions', 'consistent_strain_map', 'consistent_from_strain']
@@ -36,7 +36,7 @@ def end_rotation(q):
     Zhou, Headings, Dapino (2022), eq. (16) without its stray L_i (SPEC erratum).
 
     """
-    return kernels.end_rotation(q)
+    return chain.end_rotation(q)
 
 
 def node_positions(q, lengths):
@@ -53,7 +53,7 @@ def node_positions(q, lengths):
         End rotations [rad].
 
     """
-    return kernels.node_positions(q, lengths)
+    return chain.node_positions(q, lengths)
 
 
 def midplane_samples(q, lengths, per_segment=16):
@@ -158,7 +158,7 @@ def consistent_strain_map(q):
     docs/physics.md, section 11.1; docs/model_notes.md, "CCM reconstruction vs rod".
 
     """
-    return kernels.consistent_strain_map(q)
+    return chain.consistent_strain_map(q)
 
 
 def consistent_from_strain(qs):

@@ -3,8 +3,10 @@
 import numpy as np
 
 from .rung import check_common, LadderResult, RungSolver, set_common
-from ..engine import NewtonOptions, register
-from ..kernels import pcc as kernels
+from ..engine import CompiledProblem, NewtonOptions, register
+from ..kernels import linear, pcc as kernels
+from ..kernels.pcc_section import half_angle_sinc_kernel, section_arrays
+from ..kernels.shapes import outputs_kernel
 from ..section.law import station_layout
 from ..section.segments import share_segments
 
@@ -45,7 +47,7 @@ def half_angle_sinc(delta, order=2):
 
     """
     delta = np.asarray(delta, dtype=float)
-    rows = kernels.half_angle_sinc_kernel(delta.ravel(), int(order))
+    rows = half_angle_sinc_kernel(delta.ravel(), int(order))
     return tuple(row.reshape(delta.shape) for row in rows)
 
 
@@ -135,7 +137,7 @@ class _Banded:
 
     def dense(self):
         """Return the full (n, n) matrix (tests and diagnostics)."""
-        return kernels._dense_from_band(self.lower)
+        return linear._dense_from_band(self.lower)
 
 
 class PCCSolver(RungSolver):
@@ -179,7 +181,7 @@ class PCCSolver(RungSolver):
     Notes
     -----
     The energy, gradient, banded Hessian, chords, node Jacobian and outputs are
-    compiled kernels (`pcc_kernels`), and `kernel_data` hands them to the engine, whose
+    compiled kernels (`pcc_kernels`), and `engine_problem` hands them to the engine, whose
     loops then run compiled too; Python only builds the result.
     Newton steps solve the banded system by Cholesky (compiled, LAPACK's dpbtf2
     algorithm). Where the Hessian H is not positive definite the step solves
@@ -210,8 +212,7 @@ class PCCSolver(RungSolver):
         self.n_segments = self.lengths.size
         n = self.n_segments
         # The section law of every segment as kernel arrays, once: no per-call gathering.
-        self._stiffness, self._gas, self._pemc = kernels.section_arrays(self.law,
-                                                                        self.segment_types)
+        self._stiffness, self._gas, self._pemc = section_arrays(self.law, self.segment_types)
         # Samples at evenly spaced reference arc length: their segment and the arc length
         # into it depend on the edges alone.
         s = np.linspace(0.0, self.length, self.samples)
@@ -225,6 +226,9 @@ class PCCSolver(RungSolver):
                                       energy_scale=self.gradient_scale)
         self._data = kernels.PCCData(self.lengths, self._stiffness, self._gas, self._pemc,
                                      float(self.pressure_coefficient), self.gradient_scale)
+        #: What the engine runs: the compiled data, never this object.
+        self.engine_problem = CompiledProblem(self._data, self._data, self.flat(),
+                                              self.gradient_scale)
 
     def _compatible(self, other):
         return isinstance(other, PCCSolver) and np.array_equal(other.edges, self.edges)
@@ -253,10 +257,6 @@ class PCCSolver(RungSolver):
             nodes[k] = node
             forces[k] = force
         return nodes, forces
-
-    def kernel_data(self, loaded):
-        """Return the compiled discretisation the engine runs (`pcc_kernels.PCCData`)."""
-        return self._data
 
     def energy(self, x, pressure, loads):
         """Total potential [J] at engine unknowns `x`."""
@@ -297,8 +297,8 @@ class PCCSolver(RungSolver):
         grad = np.ascontiguousarray(grad, dtype=float)
         lower, factor, _, definite = hess.hook
         if definite:
-            return kernels.cholesky_solve(factor, -grad), 1.0
-        return kernels.shifted_step(lower, grad, self.gradient_scale)
+            return linear.cholesky_solve(factor, -grad), 1.0
+        return linear.shifted_step(lower, grad, self.gradient_scale)
 
     def solve_linear(self, hess, rhs):
         """Solve H x = rhs (banded Cholesky, else LU); LinAlgError if singular."""
@@ -436,7 +436,7 @@ class PCCSolver(RungSolver):
 
     # -- outputs ------------------------------------------------------------
     def _outputs(self, state, pressure, force):
-        nodes, points, tangent, strains, beta, coefficients, energy = kernels.outputs_kernel(
+        nodes, points, tangent, strains, beta, coefficients, energy = outputs_kernel(
             np.ascontiguousarray(state, dtype=float), self.lengths, self._stiffness,
             self._gas, self._pemc, self.pressure_coefficient * pressure,
             np.ascontiguousarray(force, dtype=float), self._sample_segment,

@@ -9,7 +9,7 @@ from .rung import check_common, RodResult, RungSolver, set_common
 from .. import engine
 from ..engine import linear_step, NewtonOptions
 from ..kernels import rod as rod_kernels
-from ..kernels.pcc import section_arrays
+from ..kernels.pcc_section import section_arrays
 from ..section.law import station_layout
 from ..validation import real_number
 
@@ -213,6 +213,8 @@ class RodSolver(RungSolver):
                                       max_step=cap, energy_scale=self._theta_scale)
         self._local_options = NewtonOptions(xtol=1e-15, max_step=0.1,
                                             energy_scale=self._theta_scale)
+        #: What the engine runs: the rod has no compiled data, so its own methods.
+        self.engine_problem = self
 
     def _sample_geometry(self):
         """Store where the output samples lie; it depends on the edges alone."""

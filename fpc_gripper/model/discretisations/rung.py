@@ -216,7 +216,7 @@ class RungSolver:
         warm = initial is not None and warm_start_allowed(math.hypot(*force))
         x0 = self._pack(initial.state) if warm else None
         loads = self.tip_loads(force)
-        out = engine.solve(self, pressure, loads, self._options, x0)
+        out = engine.solve(self.engine_problem, pressure, loads, self._options, x0)
         return self._result(out.x, out.status, out.iterations, out.gradient, out.step,
                             out.min_eig, out.fraction, pressure, loads, force)
 
@@ -243,6 +243,6 @@ class RungSolver:
         unloaded = self.solve(pressure, (0.0, 0.0), initial=initial)
         if not unloaded.success:
             return rigidity_result(self, axis, delta, pressure, unloaded)
-        out = engine.rigidity(self, self._pack(unloaded.state), pressure, self.tip_node,
-                              AXES[axis], delta, self._options)
+        out = engine.rigidity(self.engine_problem, self._pack(unloaded.state), pressure,
+                              self.tip_node, AXES[axis], delta, self._options)
         return rigidity_result(self, axis, delta, pressure, unloaded, out)

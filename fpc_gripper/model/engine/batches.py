@@ -5,7 +5,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from .solves import _compiled, _flat, _packed, _rigidity_batch_entry, _solve_batch_entry
+from .solves import _compiled, _flat, _packed, _rigidity_entry, _solve_entry
 from ..compiled import over_cores
 
 
@@ -78,8 +78,7 @@ def _batch_inputs(problems, loaded, options):
     """Typed list of compiled discretisations, flat state, options and cap; checks them."""
     datas = [_compiled(problem, loaded) for problem in problems]
     if not datas or any(data is None for data in datas):
-        raise TypeError('`problems` must be a non-empty sequence of discretisations that run '
-                        'compiled (with `kernel_data`)')
+        raise TypeError('`problems` must be a non-empty sequence of `CompiledProblem`s')
     flat = _flat(problems[0])
     opts, cap = _packed(problems[0], options, flat.shape)
     for problem, data in zip(problems, datas):
@@ -112,8 +111,8 @@ def solve_batch(problems, design, pressures, nodes, forces, options, tip, initia
 
     Parameters
     ----------
-    problems : sequence of discretisation
-        Each with ``kernel_data``; one type, unknowns' shape and options.
+    problems : sequence of CompiledProblem
+        Of one data type, unknowns' shape and options.
     design : array_like of int, shape (S,)
         Index into `problems` of every scene.
     pressures : array_like, shape (S,)
@@ -147,9 +146,9 @@ def solve_batch(problems, design, pressures, nodes, forces, options, tip, initia
     warm = initial.shape[0] > 0
 
     def run(lo, hi):
-        return _solve_batch_entry(datas, design[lo:hi], pressures[lo:hi], nodes, forces[lo:hi],
-                                  initial[lo:hi] if warm else initial, flat, opts, cap,
-                                  int(tip))
+        return _solve_entry(datas, design[lo:hi], pressures[lo:hi], nodes, forces[lo:hi],
+                            initial[lo:hi] if warm else initial, flat, opts, cap, int(tip),
+                            False)
     states, status, iterations, figures = over_cores(run, pressures.size)
     return BatchOutcome(states, status, iterations, *figures[:, :4].T, figures[:, 4:])
 
@@ -160,7 +159,7 @@ def rigidity_batch(problems, design, pressures, node, direction, displacement, o
 
     Parameters
     ----------
-    problems : sequence of discretisation
+    problems : sequence of CompiledProblem
         As for `solve_batch`.
     design : array_like of int, shape (S,)
     pressures : array_like, shape (S,)
@@ -182,13 +181,15 @@ def rigidity_batch(problems, design, pressures, node, direction, displacement, o
     free, flat, opts, cap = _batch_inputs(problems, False, options)
     loaded = _batch_inputs(problems, True, options)[0]
     direction = np.ascontiguousarray(direction, dtype=float)
+    cold = np.zeros((0,) + flat.shape)
 
     def run(lo, hi):
-        return _rigidity_batch_entry(free, loaded, design[lo:hi], pressures[lo:hi], int(node),
-                                     direction, float(displacement), flat, opts, cap)
+        return _rigidity_entry(free, loaded, design[lo:hi], pressures[lo:hi], int(node),
+                               direction, float(displacement), cold, flat, opts, cap)
     out = over_cores(run, pressures.size)
     unloaded_x, status, states, iterations, figures = out
     unloaded = BatchOutcome(unloaded_x, status, iterations[:, 0], *figures[:, :4].T,
                             np.full((pressures.size, 2), np.nan))
-    return BatchRigidity(unloaded, states, figures[:, 4], iterations[:, 1], figures[:, 5],
+    force = np.where(figures[:, 10] == 1.0, figures[:, 4], np.nan)
+    return BatchRigidity(unloaded, states, force, iterations[:, 1], figures[:, 5],
                          figures[:, 6] == 1.0, figures[:, 7], figures[:, 8:10])

@@ -7,8 +7,10 @@ import numpy as np
 
 from .active_set import _contact, _GAP_TOL
 from .outcomes import _STATUS, SolverStatus
+from .problems import CompiledProblem
 from .solves import _compiled, _contact_entry, _flat, _own, _packed, solve
-from ..kernels import ccm as kernels, contact as ck
+from ..kernels import contact as ck
+from ..kernels.chain import load_arrays
 
 
 # -- contact ---------------------------------------------------------------------------------
@@ -50,12 +52,17 @@ class ContactOutcome(typing.NamedTuple):
 
 def _contact_inputs(problem, loads, contact, options):
     """Compiled data (or None), flat state, loads, options and a private copy of `contact`."""
-    if not all(hasattr(problem, name) for name in ('point_positions', 'point_jacobian',
-                                                   'point_derivatives')):
+    if isinstance(problem, CompiledProblem):
+        has_points, kind = problem.has_points(), type(problem.data[True]).__name__
+    else:
+        has_points = all(hasattr(problem, name) for name in (
+            'point_positions', 'point_jacobian', 'point_derivatives'))
+        kind = type(problem).__name__
+    if not has_points:
         raise TypeError(f'contact needs a discretisation with face points (the PCC or the '
-                        f'rod), got {type(problem).__name__}')
+                        f'rod), got {kind}')
     flat = _flat(problem)
-    nodes, forces = kernels.load_arrays(loads)
+    nodes, forces = load_arrays(loads)
     opts, cap = _packed(problem, options, flat.shape)
     con = contact._replace(status=np.array(contact.status, dtype=np.int64),
                            anchor=np.array(contact.anchor, dtype=float))
@@ -98,7 +105,7 @@ def contact_solve(problem, pressure, loads, contact, options, initial=None, top=
 
     Parameters
     ----------
-    problem : discretisation
+    problem : CompiledProblem or discretisation
         With face points (`point_positions`, `point_jacobian`, `point_derivatives`).
     pressure : float
         [Pa].

@@ -6,19 +6,19 @@ import numpy as np
 
 from .outcomes import (_CONTINUATION_FAILED, _LINE_SEARCH_FAILED, _MAX_ITERATIONS, _NOT_FINITE,
                        _SUCCESS, _UNSTABLE)
-from ..kernels import ccm as kernels
+from ..kernels import linear
 
 
-def linear_step(grad, hess, floor=kernels.EIGEN_FLOOR):
+def linear_step(grad, hess, floor=linear.EIGEN_FLOOR):
     """
     Newton step -H^-1 g, and the smallest eigenvalue's sign (1.0 when positive definite).
 
     Where H is not positive definite its eigenvalues are mirrored (|lambda|, floored at
     `floor` times the largest) so that the step still descends; the smallest eigenvalue
     is returned. H is dense (n, n), or (N, m, m) blocks for g of shape (N, m). Compiled
-    (`kernels.newton_step`).
+    (`kernels.linear.newton_step`).
     """
-    return kernels.newton_step(grad, hess, floor)
+    return linear.newton_step(grad, hess, floor)
 
 
 def linear_solve(hess, rhs):
@@ -29,12 +29,12 @@ def linear_solve(hess, rhs):
 
 
 # -- the discretisation interface ----------------------------------------------------------
-# A discretisation is either a Python object with methods (the loops then run interpreted)
-# or a namedtuple of arrays whose type is registered here (`register`) with compiled
-# functions of the same names taking the namedtuple first (the loops then run compiled, for
-# that type). These functions are that interface; the loops call nothing else. The first
-# five (`HOOKS`) serve every solve; the three `_point_*` (`POINT_HOOKS`: face points, the PCC
-# and the rod) serve contact only.
+# A discretisation hands the engine either a Python object with methods (the loops then run
+# interpreted) or a `CompiledProblem` over namedtuples of arrays whose type is registered
+# here (`register`) with compiled functions of the same names taking the namedtuple first
+# (the loops then run compiled, for that type). These functions are that interface; the
+# loops call nothing else. The first five (`HOOKS`) serve every solve; the three `_point_*`
+# (`POINT_HOOKS`: face points, the PCC and the rod) serve contact only.
 HOOKS = ('derivatives', 'energy', 'step', 'solve_linear', 'node_jacobian')
 POINT_HOOKS = ('point_derivatives', 'point_jacobian', 'point_positions')
 _REGISTERED = {}
@@ -47,7 +47,7 @@ def register(data_type, hooks):
     Parameters
     ----------
     data_type : type
-        The namedtuple class its `kernel_data` returns.
+        The namedtuple class of the data its `CompiledProblem` carries.
     hooks : dict
         numba dispatchers by name: every name of `HOOKS`, and those of `POINT_HOOKS` for a
         discretisation with face points (contact).

@@ -98,3 +98,5 @@ class BorderedOutcome:
     fraction: float
     stable: bool
     gradient: float
+    #: Position of the loaded node in the loaded state [m], shape (2,).
+    tip: np.ndarray

@@ -3,30 +3,102 @@
 import threading
 import weakref
 
+import numba
 import numpy as np
 
 from .active_set import _contact
 from .bordered import _rigidity
 from .newton import _derivatives, _newton, _node_jacobian, _solve, _solve_linear
 from .outcomes import _STATUS, _SUCCESS, BorderedOutcome, NewtonOutcome
+from .problems import CompiledProblem
 from ..compiled import jit
-from ..kernels import ccm as kernels
+from ..kernels.chain import load_arrays
 
 
-# -- the compiled entries: what Python calls, one per loop, and the batches -----------------
+# -- the compiled entries: what Python calls, S scenes each (a single call is one scene) -----
 @jit
-def _newton_entry(problem, x, pressure, nodes, forces, options, cap):
-    return _newton(problem, x, pressure, nodes, forces, options, cap)
+def _solve_entry(problems, design, pressures, nodes, forces, initial, flat, options, cap, tip,
+                 newton_only):
+    """
+    Solve scene i by `_solve` on ``problems[design[i]]``, or by `_newton` alone.
+
+    `_newton` runs from ``initial[i]`` where `newton_only`; the tip's position is returned
+    where ``tip >= 0``.
+    """
+    count = pressures.size
+    warm = initial.shape[0] > 0
+    states = np.empty((count,) + flat.shape)
+    status = np.empty(count, dtype=np.int64)
+    iterations = np.empty(count, dtype=np.int64)
+    figures = np.full((count, 6), np.nan)
+    for i in range(count):
+        problem = problems[design[i]]
+        start = initial[i] if warm else flat
+        if newton_only:
+            x, code, its, grad, step, eig = _newton(problem, start, pressures[i], nodes,
+                                                    forces[i], options, cap)
+            fraction = 1.0
+        else:
+            x, code, its, grad, step, eig, fraction = _solve(
+                problem, start, warm, flat, pressures[i], nodes, forces[i], options, cap)
+        states[i] = x
+        status[i] = code
+        iterations[i] = its
+        figures[i, 0] = grad
+        figures[i, 1] = step
+        figures[i, 2] = eig
+        figures[i, 3] = fraction
+        if tip >= 0:
+            position = _node_jacobian(problem, x, tip)[0]
+            figures[i, 4] = position[0]
+            figures[i, 5] = position[1]
+    return states, status, iterations, figures
 
 
 @jit
-def _solve_entry(problem, initial, warm, flat, pressure, nodes, forces, options, cap):
-    return _solve(problem, initial, warm, flat, pressure, nodes, forces, options, cap)
-
-
-@jit
-def _rigidity_entry(problem, x, pressure, node, direction, displacement, options, cap):
-    return _rigidity(problem, x, pressure, node, direction, displacement, options, cap)
+def _rigidity_entry(unloaded, loaded, design, pressures, node, direction, displacement,
+                    initial, flat, options, cap):
+    """Run `_rigidity` of scene i from ``initial[i]``, or from a cold unloaded `_solve`."""
+    count = pressures.size
+    given = initial.shape[0] > 0
+    free = np.empty((count,) + flat.shape)
+    states = np.empty((count,) + flat.shape)
+    status = np.empty(count, dtype=np.int64)
+    iterations = np.zeros((count, 2), dtype=np.int64)
+    figures = np.full((count, 11), np.nan)
+    nodes = np.zeros(0, dtype=np.int64)
+    forces = np.zeros((0, 2))
+    for i in range(count):
+        d = design[i]
+        if given:
+            x = initial[i]
+            code = _SUCCESS
+        else:
+            x, code, its, grad, step, eig, fraction = _solve(
+                unloaded[d], flat, False, flat, pressures[i], nodes, forces, options, cap)
+            iterations[i, 0] = its
+            figures[i, 0] = grad
+            figures[i, 1] = step
+            figures[i, 2] = eig
+            figures[i, 3] = fraction
+        free[i] = x
+        status[i] = code
+        states[i] = x
+        if code != _SUCCESS:
+            continue
+        y, force, ok, its, done, stable, gradient = _rigidity(
+            loaded[d], x, pressures[i], node, direction, displacement, options, cap)
+        position = _node_jacobian(loaded[d], y, node)[0]
+        states[i] = y
+        iterations[i, 1] = its
+        figures[i, 4] = force
+        figures[i, 5] = done
+        figures[i, 6] = 1.0 if stable else 0.0
+        figures[i, 7] = gradient
+        figures[i, 8] = position[0]
+        figures[i, 9] = position[1]
+        figures[i, 10] = 1.0 if ok else 0.0
+    return free, status, states, iterations, figures
 
 
 # numpy's error model (a division by zero gives inf or nan, which the loops test for) keeps
@@ -38,81 +110,27 @@ def _contact_entry(problem, x, lam, status, depth, pressure, nodes, forces, con,
                     grow)
 
 
-# The batches call the single entries, compiled functions of their own, so that each loop
-# compiles once per discretisation type whether one scene or a grid runs it.
-@jit
-def _solve_batch_entry(problems, design, pressures, nodes, forces, initial, flat, options, cap,
-                       tip):
-    count = pressures.size
-    warm = initial.shape[0] > 0
-    states = np.empty((count,) + flat.shape)
-    status = np.empty(count, dtype=np.int64)
-    iterations = np.empty(count, dtype=np.int64)
-    figures = np.empty((count, 6))
-    for i in range(count):
-        problem = problems[design[i]]
-        start = initial[i] if warm else flat
-        x, code, its, grad, step, eig, fraction = _solve_entry(
-            problem, start, warm, flat, pressures[i], nodes, forces[i], options, cap)
-        states[i] = x
-        status[i] = code
-        iterations[i] = its
-        position = _node_jacobian(problem, x, tip)[0]
-        figures[i, 0] = grad
-        figures[i, 1] = step
-        figures[i, 2] = eig
-        figures[i, 3] = fraction
-        figures[i, 4] = position[0]
-        figures[i, 5] = position[1]
-    return states, status, iterations, figures
-
-
-@jit
-def _rigidity_batch_entry(unloaded, loaded, design, pressures, node, direction, displacement,
-                          flat, options, cap):
-    count = pressures.size
-    free = np.empty((count,) + flat.shape)
-    states = np.empty((count,) + flat.shape)
-    status = np.empty(count, dtype=np.int64)
-    iterations = np.empty((count, 2), dtype=np.int64)
-    figures = np.empty((count, 10))
-    nodes = np.zeros(0, dtype=np.int64)
-    forces = np.zeros((0, 2))
-    for i in range(count):
-        d = design[i]
-        x, code, its, grad, step, eig, fraction = _solve_entry(
-            unloaded[d], flat, False, flat, pressures[i], nodes, forces, options, cap)
-        free[i] = x
-        status[i] = code
-        iterations[i, 0] = its
-        figures[i, 0] = grad
-        figures[i, 1] = step
-        figures[i, 2] = eig
-        figures[i, 3] = fraction
-        figures[i, 4:] = np.nan
-        iterations[i, 1] = 0
-        states[i] = x
-        if code != _SUCCESS:
-            continue
-        y, force, ok, its, done, stable, gradient = _rigidity_entry(
-            loaded[d], x, pressures[i], node, direction, displacement, options, cap)
-        position = _node_jacobian(loaded[d], y, node)[0]
-        states[i] = y
-        iterations[i, 1] = its
-        figures[i, 4] = force if ok else np.nan
-        figures[i, 5] = done
-        figures[i, 6] = 1.0 if stable else 0.0
-        figures[i, 7] = gradient
-        figures[i, 8] = position[0]
-        figures[i, 9] = position[1]
-    return free, status, states, iterations, figures
-
-
 # -- the engine's Python entry points -------------------------------------------------------
 def _compiled(problem, loaded):
-    """Return the namedtuple a discretisation runs compiled as (`kernel_data`), or None."""
-    make = getattr(problem, 'kernel_data', None)
-    return None if make is None else make(loaded)
+    """Return the data a `CompiledProblem` runs compiled on, or None (run interpreted)."""
+    return problem.data[loaded] if isinstance(problem, CompiledProblem) else None
+
+
+def _one(problem, loaded):
+    """Return a one-item typed list of `_compiled` (the entries take S scenes), or None."""
+    memo = _derived(problem)['lists']
+    hit = memo.get(loaded)
+    if hit is None:
+        data = _compiled(problem, loaded)
+        if data is None:
+            return None
+        with _DERIVED_LOCK:
+            hit = memo.setdefault(loaded, numba.typed.List([data]))
+    return hit
+
+
+#: The design index of a one-scene call (read only by the entries).
+_SCENE = np.zeros(1, dtype=np.int64)
 
 
 #: What the engine derives once per discretisation (its flat state, its packed options),
@@ -126,7 +144,8 @@ def _derived(problem):
     memo = _DERIVED.get(problem)
     if memo is None:
         with _DERIVED_LOCK:
-            memo = _DERIVED.setdefault(problem, {'flat': None, 'packed': {}})
+            memo = _DERIVED.setdefault(problem, {'flat': None, 'packed': {}, 'lists': {},
+                                                 'none': None})
     return memo
 
 
@@ -155,6 +174,21 @@ def _own(x, problem):
     return x.copy() if x is _derived(problem)['flat'] else x
 
 
+def _no_start(problem, flat):
+    """The entries' `initial` of a cold scene: no rows."""
+    memo = _derived(problem)
+    if memo['none'] is None:
+        memo['none'] = np.zeros((0,) + flat.shape)
+    return memo['none']
+
+
+def _scene(out):
+    """The `NewtonOutcome` of a one-scene `_solve_entry`."""
+    states, status, iterations, figures = out
+    return NewtonOutcome(states[0], _STATUS[int(status[0])], int(iterations[0]),
+                         *figures[0, :4].tolist())
+
+
 def _outcome(out, problem, fraction=1.0):
     x, status, iterations, grad, step, eig = out[:6]
     return NewtonOutcome(_own(x, problem), _STATUS[status], iterations, grad, step, eig,
@@ -165,14 +199,13 @@ def newton(problem, x, pressure, loads, options):
     """
     Damped Newton on the total potential of a discretisation.
 
-    The loop (`_newton`) is written once: compiled for a discretisation that has
-    ``kernel_data(loaded)`` (a namedtuple whose class carries its compiled kernels),
-    interpreted with the discretisation's methods otherwise.
+    The loop (`_newton`) is written once: compiled on a `CompiledProblem` (the data of a
+    registered type), interpreted on any other object, through its methods.
 
     Parameters
     ----------
-    problem : discretisation
-        Has ``derivatives(x, pressure, loads) -> (energy, gradient, hessian)``,
+    problem : CompiledProblem or discretisation
+        A discretisation has ``derivatives(x, pressure, loads) -> (energy, gradient, hessian)``,
         ``energy(x, pressure, loads)``, ``step(gradient, hessian) -> (dx, min_eig)`` and
         ``gradient_scale``; `x` and the gradient share a shape, the Hessian is opaque to
         the engine.
@@ -197,12 +230,13 @@ def newton(problem, x, pressure, loads, options):
 
     """
     x = np.ascontiguousarray(x, dtype=float)
-    nodes, forces = kernels.load_arrays(loads)
+    nodes, forces = load_arrays(loads)
     opts, cap = _packed(problem, options, x.shape)
-    data = _compiled(problem, bool(loads))
-    if data is None:
+    datas = _one(problem, bool(loads))
+    if datas is None:
         return _outcome(_newton(problem, x, pressure, nodes, forces, opts, cap), problem)
-    return _outcome(_newton_entry(data, x, float(pressure), nodes, forces, opts, cap), problem)
+    return _scene(_solve_entry(datas, _SCENE, np.array((float(pressure),)), nodes, forces[None],
+                               x[None], x, opts, cap, -1, True))
 
 
 def solve(problem, pressure, loads, options, initial=None):
@@ -218,7 +252,7 @@ def solve(problem, pressure, loads, options, initial=None):
 
     Parameters
     ----------
-    problem : discretisation
+    problem : CompiledProblem or discretisation
         See `newton`; also ``flat()`` (the unstrained state).
     pressure : float
         Gauge pressure [Pa].
@@ -238,14 +272,15 @@ def solve(problem, pressure, loads, options, initial=None):
     flat = _flat(problem)
     warm = initial is not None
     start = np.ascontiguousarray(initial, dtype=float) if warm else flat
-    nodes, forces = kernels.load_arrays(loads)
+    nodes, forces = load_arrays(loads)
     opts, cap = _packed(problem, options, flat.shape)
-    data = _compiled(problem, bool(loads))
-    if data is None:
-        out = _solve(problem, start, warm, flat, pressure, nodes, forces, opts, cap)
-    else:
-        out = _solve_entry(data, start, warm, flat, float(pressure), nodes, forces, opts, cap)
-    return _outcome(out, problem)
+    datas = _one(problem, bool(loads))
+    if datas is None:
+        return _outcome(_solve(problem, start, warm, flat, pressure, nodes, forces, opts, cap),
+                        problem)
+    return _scene(_solve_entry(datas, _SCENE, np.array((float(pressure),)), nodes, forces[None],
+                               start[None] if warm else _no_start(problem, flat), flat, opts,
+                               cap, -1, False))
 
 
 def rigidity(problem, unloaded_x, pressure, node, direction, displacement, options):
@@ -258,7 +293,7 @@ def rigidity(problem, unloaded_x, pressure, node, direction, displacement, optio
 
     Parameters
     ----------
-    problem : discretisation
+    problem : CompiledProblem or discretisation
         See `newton`; also ``node_jacobian(x, node) -> (position (2,), d position/dx)``
         and ``solve_linear(hessian, rhs)`` (raises LinAlgError when singular).
     unloaded_x : ndarray
@@ -285,25 +320,31 @@ def rigidity(problem, unloaded_x, pressure, node, direction, displacement, optio
     x = np.ascontiguousarray(unloaded_x, dtype=float)
     direction = np.ascontiguousarray(direction, dtype=float)
     opts, cap = _packed(problem, options, x.shape)
-    data = _compiled(problem, True)
-    if data is None:
+    loaded = _one(problem, True)
+    if loaded is None:
         out = _rigidity(problem, x, pressure, int(node), direction, float(displacement), opts,
                         cap)
+        tip = np.asarray(_node_jacobian(problem, out[0], int(node))[0], dtype=float)
     else:
-        out = _rigidity_entry(data, x, float(pressure), int(node), direction,
-                              float(displacement), opts, cap)
+        _, _, states, its, figures = _rigidity_entry(
+            _one(problem, False), loaded, _SCENE, np.array((float(pressure),)), int(node),
+            direction, float(displacement), x[None], x, opts, cap)
+        tip = figures[0, 8:10]
+        figure = figures[0].tolist()
+        out = (states[0], figure[4], figure[10] == 1.0, its[0, 1], figure[5], figure[6] == 1.0,
+               figure[7])
     x, force, success, iterations, fraction, stable, gradient = out
     return BorderedOutcome(x, float(force), bool(success), int(iterations), float(fraction),
-                           bool(stable), float(gradient))
+                           bool(stable), float(gradient), tip)
 
 
-def sensitivity(problem, x, pressure, loads, control=None):
+def sensitivity(problem, x, pressure, loads, rates, control=None):
     """
     Parameter sensitivities of an equilibrium by the implicit function theorem.
 
     At an equilibrium g(x; theta) = 0 with a non-singular Hessian H, the state moves
-    with the parameters as dx/dtheta = -H^-1 dg/dtheta; dg/dtheta is the
-    discretisation's ``parameter_gradient(x, pressure, loads)`` (the loads do not depend
+    with the parameters as dx/dtheta = -H^-1 dg/dtheta; dg/dtheta are the `rates` (the
+    discretisation's ``parameter_gradient(x, pressure, loads)``; the loads do not depend
     on theta). Under displacement control (`rigidity`'s bordered system: the gradient
     g - f grad c with c = e . O_node, and c(x) = target), the force f moves too:
 
@@ -315,8 +356,8 @@ def sensitivity(problem, x, pressure, loads, control=None):
 
     Parameters
     ----------
-    problem : discretisation
-        As for `rigidity`, with ``parameter_gradient(x, pressure, loads) -> (P,) + x.shape``.
+    problem : CompiledProblem or discretisation
+        As for `rigidity`.
     x : ndarray
         The equilibrium [scaled units].
     pressure : float
@@ -324,6 +365,8 @@ def sensitivity(problem, x, pressure, loads, control=None):
     loads : sequence of (int, ndarray (2,))
         The loads of that equilibrium (under displacement control: the found force at
         the node, ``[(node, f e)]``).
+    rates : ndarray, shape (P,) + x.shape
+        dg/dtheta at the equilibrium [J per unit of each parameter].
     control : (int, ndarray (2,), ndarray (P,)), optional
         Displacement control: the node, the unit direction e, and d target / d theta
         (the rate of e . O_node of the unloaded state plus delta) [m per unit].
@@ -347,9 +390,9 @@ def sensitivity(problem, x, pressure, loads, control=None):
 
     """
     x = np.ascontiguousarray(x, dtype=float)
-    nodes, forces = kernels.load_arrays(loads)
+    nodes, forces = load_arrays(loads)
     _, _, hess = _derivatives(problem, x, pressure, nodes, forces)
-    rates = np.asarray(problem.parameter_gradient(x, pressure, loads), dtype=float)
+    rates = np.asarray(rates, dtype=float)
     solved = np.empty_like(rates)
     for k, rate in enumerate(rates):
         solved[k], ok = _solve_linear(problem, hess, np.ascontiguousarray(rate))

@@ -5,7 +5,7 @@ import math
 
 import numpy as np
 
-from .pcc import _section_energy, _section_slopes
+from .pcc_section import _section_energy, _section_slopes
 from ..compiled import jit
 
 __all__ = ['ArcData', 'arc_integrals', 'arc_derivatives', 'arc_energy', 'arc_step',

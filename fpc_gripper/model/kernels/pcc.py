@@ -1,187 +1,24 @@
-"""Compiled (numba) kernels of the PCC rod: section law, chords, banded derivatives and steps."""
+"""Compiled (numba) PCC rod: banded derivatives of its potential, kinematics, face points."""
 
 import collections
 import math
 
 import numpy as np
 
+from .linear import _dense_from_band, banded_step, cholesky_solve, shifted_step
+from .pcc_section import _section_energy, _section_slopes, _sinc, _sinc0
 from ..compiled import jit
 
-__all__ = ['section_arrays', 'half_angle_sinc_kernel', 'energy_kernel', 'derivatives_kernel',
-           'banded_cholesky', 'cholesky_solve', 'newton_step_kernel', 'nodes_kernel',
-           'node_jacobian_kernel', 'outputs_kernel', 'BANDWIDTH', 'PCCData', 'shifted_step',
-           'pcc_derivatives', 'pcc_energy', 'pcc_step', 'pcc_solve_linear',
-           'pcc_node_jacobian', 'point_positions_kernel', 'point_jacobian_kernel',
-           'point_derivatives_kernel']
+__all__ = ['energy_kernel', 'derivatives_kernel', 'nodes_kernel', 'node_jacobian_kernel',
+           'BANDWIDTH', 'PCCData', 'pcc_derivatives', 'pcc_energy', 'pcc_step',
+           'pcc_solve_linear', 'pcc_node_jacobian', 'point_positions_kernel',
+           'point_jacobian_kernel', 'point_derivatives_kernel', 'PCC_HOOKS']
 
 # Built at install (`compiled`), once per argument types; nogil lets a caller thread them.
 _jit = jit
 
 #: Half-bandwidth of the PCC Hessian in the engine's ordering (eps_i, c1_i, theta_i).
 BANDWIDTH = 3
-#: Taylor coefficients (-1)^k / (2k + 1)! of sin(h)/h in h^2, k = 0..9: for |h| < 1 the
-#: first omitted terms (of S and its derivatives) are below 1e-17 of S, S' / h and S''.
-_SINC = np.array([(-1.0) ** k / math.factorial(2 * k + 1) for k in range(10)])
-_K = np.arange(10)
-#: The same series differentiated once (divided by h) and twice in h.
-_SINC_D1 = (2 * _K * _SINC)[1:]
-_SINC_D2 = (2 * _K * (2 * _K - 1) * _SINC)[1:]
-#: |h| below which the series replaces the closed forms (which cancel as h -> 0).
-_SERIES_BELOW = 1.0
-# Layout of the PEMC vector of `section_arrays`: Gauss points z_j, weights w_j, z_j w_j,
-# z_j^2 w_j (3 each), the prestrain eps0 and the stress law a1..a4.
-_Z, _W, _ZW, _ZZW, _PRESTRAIN, _A1 = 0, 3, 6, 9, 12, 13
-_PEMC_SIZE = 17
-
-
-def section_arrays(law, types):
-    """
-    Return the section law of every segment as the kernels take it (once per solver).
-
-    Parameters
-    ----------
-    law : SectionLaw
-    types : ndarray of int, shape (N,)
-        Section type of every segment.
-
-    Returns
-    -------
-    stiffness : ndarray, shape (N, 3, 3)
-        K of every segment [N, N m, N m^2].
-    gas : ndarray, shape (N, 2)
-        (g0 [m^2], g1 [m^3]) of every segment.
-    pemc : ndarray, shape (17,)
-        PEMC Gauss points z_j [m], weights w_j [m^2], z_j w_j [m^3], z_j^2 w_j [m^4],
-        prestrain eps0 [-] and stress law (a1..a4) [Pa].
-
-    """
-    stiffness = np.ascontiguousarray(law.stiffness[types], dtype=float)
-    gas = np.ascontiguousarray(law.gas[types], dtype=float)
-    z, w = law.pemc_z, law.pemc_weights
-    zw = z * w
-    pemc = np.concatenate([z, w, zw, z * zw, [law.prestrain], law.emc]).astype(float)
-    assert pemc.size == _PEMC_SIZE
-    return stiffness, gas, pemc
-
-
-# -- S(delta) -------------------------------------------------------------------------------
-@_jit
-def _horner(x, coefficients):
-    """Return sum_k coefficients[k] x^k by Horner's rule."""
-    k = coefficients.size - 1
-    out = coefficients[k]
-    for j in range(k - 1, -1, -1):
-        out = out * x + coefficients[j]
-    return out
-
-
-@_jit
-def _sinc0(delta):
-    """S(delta) = sin(delta/2) / (delta/2): series for |delta/2| < 1, else the closed form."""
-    h = 0.5 * delta
-    if abs(h) < _SERIES_BELOW:
-        return _horner(h * h, _SINC)
-    return math.sin(h) / h
-
-
-@_jit
-def _sinc(delta):
-    """S(delta) and its first two derivatives in delta [-, 1/rad, 1/rad^2]."""
-    h = 0.5 * delta
-    if abs(h) < _SERIES_BELOW:
-        h2 = h * h
-        return (_horner(h2, _SINC), 0.5 * (h * _horner(h2, _SINC_D1)),
-                0.25 * _horner(h2, _SINC_D2))
-    sn, cs = math.sin(h), math.cos(h)
-    h2 = h * h
-    d2 = -sn / h - 2.0 * cs / h2 + 2.0 * sn / math.pow(h, 3.0)
-    return sn / h, 0.5 * ((h * cs - sn) / h2), 0.25 * d2
-
-
-@_jit
-def half_angle_sinc_kernel(delta, order):
-    """
-    S(delta) = sin(delta/2) / (delta/2) and its derivatives, exact and smooth at 0.
-
-    Parameters
-    ----------
-    delta : ndarray, shape (M,)
-        Turning angles [rad].
-    order : int
-        Highest derivative returned, 0..2.
-
-    Returns
-    -------
-    ndarray, shape (order + 1, M)
-        S, dS/ddelta, d2S/ddelta2 [-, 1/rad, 1/rad^2].
-
-    """
-    rows = 1 + min(max(order, 0), 2)
-    out = np.empty((rows, delta.size))
-    for k in range(delta.size):
-        if rows == 1:
-            out[0, k] = _sinc0(delta[k])
-        else:
-            s0, s1, s2 = _sinc(delta[k])
-            out[0, k] = s0
-            out[1, k] = s1
-            if rows == 3:
-                out[2, k] = s2
-    return out
-
-
-# -- the section law W(eps, kappa, c1; k_p P) of segment i -------------------------------------
-@_jit
-def _section_energy(stiffness, gas, pemc, i, eps, kappa, c1, work):
-    """Energy per unit length W [J/m] of segment i (section_law.SectionLaw.energy)."""
-    quad = 0.0
-    for a in range(3):
-        ya = eps if a == 0 else (kappa if a == 1 else c1)
-        ky = stiffness[i, a, 0] * eps + stiffness[i, a, 1] * kappa + stiffness[i, a, 2] * c1
-        quad += ya * ky
-    a1, a2, a3, a4 = pemc[_A1], pemc[_A1 + 1], pemc[_A1 + 2], pemc[_A1 + 3]
-    pemc_energy = 0.0
-    for j in range(3):
-        s = pemc[_PRESTRAIN] + eps - pemc[_Z + j] * kappa
-        density = s * s * (a4 / 2.0 + s * (a3 / 3.0 + s * (a2 / 4.0 + s * a1 / 5.0)))
-        pemc_energy += density * pemc[_W + j]
-    gas_term = (1.0 + c1) * (gas[i, 0] * (1.0 + eps) - gas[i, 1] * kappa)
-    return 0.5 * quad + pemc_energy - work * gas_term
-
-
-@_jit
-def _section_slopes(stiffness, gas, pemc, i, eps, kappa, c1, work, g, h):
-    """Gradient g (3,) and Hessian h (3, 3) of W in (eps, kappa, c1) of segment i."""
-    a1, a2, a3, a4 = pemc[_A1], pemc[_A1 + 1], pemc[_A1 + 2], pemc[_A1 + 3]
-    sig_w = sig_zw = 0.0
-    t0 = t1 = t2 = 0.0
-    for j in range(3):
-        s = pemc[_PRESTRAIN] + eps - pemc[_Z + j] * kappa
-        sigma = s * (a4 + s * (a3 + s * (a2 + s * a1)))
-        tangent = a4 + s * (2.0 * a3 + s * (3.0 * a2 + s * 4.0 * a1))
-        sig_w += sigma * pemc[_W + j]
-        sig_zw += sigma * pemc[_ZW + j]
-        t0 += tangent * pemc[_W + j]
-        t1 += tangent * pemc[_ZW + j]
-        t2 += tangent * pemc[_ZZW + j]
-    g0, g1 = gas[i, 0], gas[i, 1]
-    lin = g0 * (1.0 + eps) - g1 * kappa
-    push = work * (1.0 + c1)
-    for a in range(3):
-        g[a] = stiffness[i, a, 0] * eps + stiffness[i, a, 1] * kappa + stiffness[i, a, 2] * c1
-        for b in range(3):
-            h[a, b] = stiffness[i, a, b]
-    g[0] += sig_w - push * g0
-    g[1] += -sig_zw + push * g1
-    g[2] += -work * lin
-    h[0, 0] += t0
-    h[0, 1] -= t1
-    h[1, 0] -= t1
-    h[1, 1] += t2
-    h[0, 2] -= work * g0
-    h[2, 0] -= work * g0
-    h[1, 2] += work * g1
-    h[2, 1] += work * g1
 
 
 @_jit
@@ -260,7 +97,7 @@ def derivatives_kernel(x, lengths, stiffness, gas, pemc, work, load_nodes, load_
 
     The assembly (`_assemble`) and, since the engine's next call is the Newton step with
     this Hessian, the banded Cholesky factor and step, once for the step and the
-    bordered solves (`newton_step_kernel`).
+    bordered solves (`banded_step`).
 
     Parameters are those of `energy_kernel`.
 
@@ -269,7 +106,7 @@ def derivatives_kernel(x, lengths, stiffness, gas, pemc, work, load_nodes, load_
     energy, gradient, lower
         See `_assemble`.
     factor, step, definite
-        `newton_step_kernel` of (lower, gradient).
+        `banded_step` of (lower, gradient).
 
     References
     ----------
@@ -278,7 +115,7 @@ def derivatives_kernel(x, lengths, stiffness, gas, pemc, work, load_nodes, load_
     """
     energy, grad, lower = _assemble(x, lengths, stiffness, gas, pemc, work, load_nodes,
                                     load_forces)
-    factor, step, definite = newton_step_kernel(lower, grad)
+    factor, step, definite = banded_step(lower, grad)
     return energy, grad, lower, factor, step, definite
 
 
@@ -370,95 +207,6 @@ def _assemble(x, lengths, stiffness, gas, pemc, work, load_nodes, load_forces):
         lower[0, b] = h_bb
         prev = theta
     return strain - load, grad, lower
-
-
-# -- banded Cholesky (LAPACK dpbtf2 / dpbtrs, lower; the rows give the half-bandwidth) --------
-@_jit
-def banded_cholesky(lower):
-    """
-    Cholesky factor of a symmetric band matrix in lower form, and whether it is PD.
-
-    Parameters
-    ----------
-    lower : ndarray, shape (b + 1, n)
-        lower[d, k] = H[k + d, k], half-bandwidth b (3 for the PCC, the degree for the
-        rod's condensed system).
-
-    Returns
-    -------
-    factor : ndarray, shape (b + 1, n)
-        L in the same form (H = L L^T); meaningful only when `definite`.
-    definite : bool
-        False on the first pivot <= 0; as LAPACK, NaN pivots propagate instead.
-
-    """
-    n = lower.shape[1]
-    band = lower.shape[0] - 1
-    factor = lower.copy()
-    for j in range(n):
-        pivot = factor[0, j]
-        if pivot <= 0.0:
-            return factor, False
-        pivot = math.sqrt(pivot)
-        factor[0, j] = pivot
-        reach = min(band, n - 1 - j)
-        scale = 1.0 / pivot
-        for d in range(1, reach + 1):
-            factor[d, j] *= scale
-        # Rank-one update of the trailing (reach x reach) block, column by column.
-        for col in range(reach):
-            xc = factor[col + 1, j]
-            for row in range(col, reach):
-                factor[row - col, j + 1 + col] -= factor[row + 1, j] * xc
-    return factor, True
-
-
-@_jit
-def _substitute(factor, x):
-    """Solve L L^T y = x in place (forward then back substitution in the band)."""
-    n = x.size
-    band = factor.shape[0] - 1
-    for j in range(n):
-        if x[j] != 0.0:
-            x[j] /= factor[0, j]
-            temp = x[j]
-            for d in range(1, min(band, n - 1 - j) + 1):
-                x[j + d] -= temp * factor[d, j]
-    for j in range(n - 1, -1, -1):
-        temp = x[j]
-        for d in range(min(band, n - 1 - j), 0, -1):
-            temp -= factor[d, j] * x[j + d]
-        x[j] = temp / factor[0, j]
-
-
-@_jit
-def cholesky_solve(factor, rhs):
-    """Solve L L^T x = rhs for x, shape (n,), given the `banded_cholesky` factor L."""
-    out = rhs.copy()
-    _substitute(factor, out)
-    return out
-
-
-@_jit
-def newton_step_kernel(lower, grad):
-    """
-    Newton step -H^-1 g by banded Cholesky.
-
-    Returns
-    -------
-    factor : ndarray, shape (4, n)
-        The Cholesky factor (reused by linear solves with the same H).
-    step : ndarray, shape (n,)
-        -H^-1 g; meaningless unless `definite`.
-    definite : bool
-        H is positive definite.
-
-    """
-    factor, definite = banded_cholesky(lower)
-    step = -grad
-    if definite:
-        _substitute(factor, step)
-    return factor, step, definite
 
 
 # -- kinematics ------------------------------------------------------------------------------
@@ -713,93 +461,8 @@ def point_derivatives_kernel(x, lengths, stiffness, gas, pemc, work, load_nodes,
             lower[0, e - 1] += local[1, 0]
             lower[1, e - 1] += local[2, 0]
             lower[3, e - 1] += local[3, 0]
-    factor, step, definite = newton_step_kernel(lower, grad)
+    factor, step, definite = banded_step(lower, grad)
     return energy, grad, lower, factor, step, definite
-
-
-@_jit
-def outputs_kernel(state, lengths, stiffness, gas, pemc, work, tip_force, sample_segment,
-                   sample_offset):
-    """
-    Return the result fields of a state: nodes, samples on the arcs, strains, coefficients.
-
-    Parameters
-    ----------
-    state : ndarray, shape (N, 3)
-        (theta_i [rad], eps_i [-], c1_i [-]) of every segment.
-    lengths, stiffness, gas, pemc, work
-        As `energy_kernel`.
-    tip_force : ndarray, shape (2,)
-        (F_X, F_Z) at the tip [N].
-    sample_segment : ndarray of int64, shape (M,)
-        Segment of every sample, root to tip.
-    sample_offset : ndarray, shape (M,)
-        Reference arc length sigma of every sample from its segment's start [m].
-
-    Returns
-    -------
-    nodes : ndarray, shape (N + 1, 2)
-        [m].
-    points : ndarray, shape (M, 2)
-        Samples: at sigma into segment i the tangent has turned by kappa_i sigma and the
-        partial chord is (1 + eps_i) sigma S(kappa_i sigma) along the mean tangent [m];
-        the last is the tip.
-    tangent : ndarray, shape (M,)
-        [rad].
-    strains : ndarray, shape (M, 3)
-        (eps [-], kappa [1/m], c1 [-]).
-    beta : ndarray, shape (N,)
-        theta_i - theta_{i-1} [rad].
-    coefficients : ndarray, shape (N, 4)
-        (eps, -kappa^2/6, c1, kappa/2) [-, 1/m^2, -, 1/m].
-    energy : float
-        Total potential under the tip force [J].
-
-    """
-    n = lengths.size
-    x = np.empty(3 * n)
-    for i in range(n):
-        x[3 * i] = state[i, 1]
-        x[3 * i + 1] = state[i, 2]
-        x[3 * i + 2] = state[i, 0]
-    nodes = nodes_kernel(x, lengths)
-    prev = np.empty(n)
-    beta = np.empty(n)
-    kappa = np.empty(n)
-    coefficients = np.empty((n, 4))
-    before = 0.0
-    for i in range(n):
-        theta, eps, c1 = state[i, 0], state[i, 1], state[i, 2]
-        prev[i] = before
-        beta[i] = theta - before
-        kappa[i] = beta[i] / lengths[i]
-        coefficients[i, 0] = eps
-        coefficients[i, 1] = -(kappa[i] * kappa[i]) / 6.0
-        coefficients[i, 2] = c1
-        coefficients[i, 3] = 0.5 * kappa[i]
-        before = theta
-    m = sample_segment.size
-    points = np.empty((m, 2))
-    tangent = np.empty(m)
-    strains = np.empty((m, 3))
-    for k in range(m):
-        i = sample_segment[k]
-        sigma = sample_offset[k]
-        eps = state[i, 1]
-        turn = kappa[i] * sigma
-        half = prev[i] + 0.5 * turn
-        reach = ((1.0 + eps) * sigma) * _sinc0(turn)
-        points[k, 0] = nodes[i, 0] + reach * math.cos(half)
-        points[k, 1] = nodes[i, 1] + reach * math.sin(half)
-        tangent[k] = prev[i] + turn
-        strains[k, 0] = eps
-        strains[k, 1] = kappa[i]
-        strains[k, 2] = state[i, 2]
-    points[m - 1, 0], points[m - 1, 1] = nodes[n, 0], nodes[n, 1]
-    tip = np.full(1, n)
-    energy = energy_kernel(x, lengths, stiffness, gas, pemc, work, tip,
-                           tip_force.reshape(1, 2))
-    return nodes, points, tangent, strains, beta, coefficients, energy
 
 
 # -- the engine's discretisation: the PCC rod as a namedtuple of arrays -----------------------
@@ -808,60 +471,6 @@ def outputs_kernel(state, lengths, stiffness, gas, pemc, work, tip_force, sample
 #: `derivatives_kernel`.
 PCCData = collections.namedtuple('PCCData', ('lengths', 'stiffness', 'gas', 'pemc',
                                              'pressure_coefficient', 'gradient_scale'))
-
-
-@_jit
-def _dense_from_band(lower):
-    """Return the full (n, n) matrix of a symmetric band in lower form."""
-    n = lower.shape[1]
-    out = np.zeros((n, n))
-    for d in range(BANDWIDTH + 1):
-        for k in range(n - d):
-            out[k + d, k] = lower[d, k]
-            out[k, k + d] = lower[d, k]
-    return out
-
-
-@_jit
-def shifted_step(lower, grad, gradient_scale):
-    """
-    Descent step of an indefinite banded Hessian H, and its scaled lambda_min (< 0).
-
-    Solves (H + tau D) dx = -g with D = |diag H| and tau = 2 |lambda_min| (+1e-10) of the
-    Jacobi-scaled Hessian D^(-1/2) H D^(-1/2), doubling tau until the banded Cholesky
-    succeeds; a gradient step -g / gradient_scale if it never does.
-
-    Returns
-    -------
-    step : ndarray, shape (n,)
-        NaN where the scaled Hessian is not finite.
-    min_eig : float
-        lambda_min of the scaled Hessian, at most -1e-300.
-
-    """
-    n = lower.shape[1]
-    root = np.empty(n)
-    for k in range(n):
-        root[k] = math.sqrt(max(abs(lower[0, k]), 1e-300))
-    scaled = lower.copy()
-    for d in range(BANDWIDTH + 1):
-        for k in range(n - d):
-            scaled[d, k] /= root[k + d] * root[k]
-    if not np.all(np.isfinite(scaled)):
-        return np.full(n, np.nan), -1.0
-    min_eig = min(np.linalg.eigvalsh(_dense_from_band(scaled))[0], -1e-300)
-    shift = 2.0 * abs(min_eig) + 1e-10
-    for _ in range(60):
-        trial = scaled.copy()
-        for k in range(n):
-            trial[0, k] += shift
-        factor, definite = banded_cholesky(trial)
-        if definite:
-            step = -grad / root
-            _substitute(factor, step)
-            return step / root, min_eig
-        shift *= 2.0
-    return -grad / gradient_scale, min_eig
 
 
 @_jit

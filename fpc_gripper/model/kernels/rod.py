@@ -4,7 +4,8 @@ import math
 
 import numpy as np
 
-from .pcc import _section_energy, _section_slopes, banded_cholesky, cholesky_solve
+from .linear import banded_cholesky, cholesky_solve
+from .pcc_section import _section_energy, _section_slopes
 from ..compiled import jit
 
 __all__ = ['energy_kernel', 'derivatives_kernel', 'newton_step_kernel', 'condense_kernel',

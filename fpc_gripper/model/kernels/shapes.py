@@ -1,14 +1,16 @@
-"""Compiled (numba) shape outputs: CCM midplane samples and the orthogonal-distance circle fit."""
+"""Compiled (numba) shape outputs: the PCC's fields, CCM midplane samples, the circle fit."""
 
 import math
 
 import numpy as np
 
-from . import arc as arc_kernels, ccm as kernels, pcc as pcc_kernels
+from . import arc as arc_kernels, chain
+from .pcc import energy_kernel, nodes_kernel
+from .pcc_section import _sinc0
 from ..compiled import jit
 
-__all__ = ['signed_distances', 'distance_jacobian', 'circle_fit', 'ccm_samples',
-           'ccm_circles', 'pcc_circles']
+__all__ = ['signed_distances', 'distance_jacobian', 'circle_fit', 'outputs_kernel',
+           'ccm_samples', 'ccm_circles', 'pcc_circles']
 
 # Built at install (`compiled`), once per argument types; nogil lets a caller thread them.
 _jit = jit
@@ -317,6 +319,91 @@ def circle_fit(points):
     return 2.0 * a / scale, scale * math.sqrt(square / n), center_x, center_z
 
 
+@_jit
+def outputs_kernel(state, lengths, stiffness, gas, pemc, work, tip_force, sample_segment,
+                   sample_offset):
+    """
+    Return the result fields of a state: nodes, samples on the arcs, strains, coefficients.
+
+    Parameters
+    ----------
+    state : ndarray, shape (N, 3)
+        (theta_i [rad], eps_i [-], c1_i [-]) of every segment.
+    lengths, stiffness, gas, pemc, work
+        As `energy_kernel`.
+    tip_force : ndarray, shape (2,)
+        (F_X, F_Z) at the tip [N].
+    sample_segment : ndarray of int64, shape (M,)
+        Segment of every sample, root to tip.
+    sample_offset : ndarray, shape (M,)
+        Reference arc length sigma of every sample from its segment's start [m].
+
+    Returns
+    -------
+    nodes : ndarray, shape (N + 1, 2)
+        [m].
+    points : ndarray, shape (M, 2)
+        Samples: at sigma into segment i the tangent has turned by kappa_i sigma and the
+        partial chord is (1 + eps_i) sigma S(kappa_i sigma) along the mean tangent [m];
+        the last is the tip.
+    tangent : ndarray, shape (M,)
+        [rad].
+    strains : ndarray, shape (M, 3)
+        (eps [-], kappa [1/m], c1 [-]).
+    beta : ndarray, shape (N,)
+        theta_i - theta_{i-1} [rad].
+    coefficients : ndarray, shape (N, 4)
+        (eps, -kappa^2/6, c1, kappa/2) [-, 1/m^2, -, 1/m].
+    energy : float
+        Total potential under the tip force [J].
+
+    """
+    n = lengths.size
+    x = np.empty(3 * n)
+    for i in range(n):
+        x[3 * i] = state[i, 1]
+        x[3 * i + 1] = state[i, 2]
+        x[3 * i + 2] = state[i, 0]
+    nodes = nodes_kernel(x, lengths)
+    prev = np.empty(n)
+    beta = np.empty(n)
+    kappa = np.empty(n)
+    coefficients = np.empty((n, 4))
+    before = 0.0
+    for i in range(n):
+        theta, eps, c1 = state[i, 0], state[i, 1], state[i, 2]
+        prev[i] = before
+        beta[i] = theta - before
+        kappa[i] = beta[i] / lengths[i]
+        coefficients[i, 0] = eps
+        coefficients[i, 1] = -(kappa[i] * kappa[i]) / 6.0
+        coefficients[i, 2] = c1
+        coefficients[i, 3] = 0.5 * kappa[i]
+        before = theta
+    m = sample_segment.size
+    points = np.empty((m, 2))
+    tangent = np.empty(m)
+    strains = np.empty((m, 3))
+    for k in range(m):
+        i = sample_segment[k]
+        sigma = sample_offset[k]
+        eps = state[i, 1]
+        turn = kappa[i] * sigma
+        half = prev[i] + 0.5 * turn
+        reach = ((1.0 + eps) * sigma) * _sinc0(turn)
+        points[k, 0] = nodes[i, 0] + reach * math.cos(half)
+        points[k, 1] = nodes[i, 1] + reach * math.sin(half)
+        tangent[k] = prev[i] + turn
+        strains[k, 0] = eps
+        strains[k, 1] = kappa[i]
+        strains[k, 2] = state[i, 2]
+    points[m - 1, 0], points[m - 1, 1] = nodes[n, 0], nodes[n, 1]
+    tip = np.full(1, n)
+    energy = energy_kernel(x, lengths, stiffness, gas, pemc, work, tip,
+                           tip_force.reshape(1, 2))
+    return nodes, points, tangent, strains, beta, coefficients, energy
+
+
 # -- midplane samples of the CCM ------------------------------------------------------------
 @_jit
 def ccm_samples(q, lengths, per_segment):
@@ -334,7 +421,7 @@ def ccm_samples(q, lengths, per_segment):
     ----------
     Zhou, Headings, Dapino (2022), eq. (15); SPEC "Derived outputs".
     """
-    nodes, theta, _ = kernels.node_positions_kernel(q, lengths)
+    nodes, theta, _ = chain.node_positions_kernel(q, lengths)
     n = q.shape[0]
     m = per_segment
     points = np.empty((n * m + 1, 2))
@@ -420,7 +507,7 @@ def pcc_circles(states, datas, sample_segment, sample_offset, slots, pressures, 
             state[k, 0] = states[i, 3 * k + 2]
             state[k, 1] = states[i, 3 * k]
             state[k, 2] = states[i, 3 * k + 1]
-        points = pcc_kernels.outputs_kernel(
+        points = outputs_kernel(
             state, data.lengths, data.stiffness, data.gas, data.pemc,
             data.pressure_coefficient * pressures[i], forces[i], sample_segment[slots[i]],
             sample_offset[slots[i]])[1]
