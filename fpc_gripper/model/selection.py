@@ -1,7 +1,6 @@
 """Model selection on the ladder (arc, CCM-N, rod) and automatic segment refinement."""
 
 import bisect
-import copy
 from dataclasses import dataclass
 import functools
 import json
@@ -558,10 +557,12 @@ class AdaptiveSolver:
         A copy, so that the rung's own result (which a warm start may hold) never changes
         after its solve returned it.
         """
-        labelled = copy.copy(result)
-        labelled.model_choice = ModelChoice(choice.rung, n, choice.predicted_error,
-                                            choice.reason if n == choice.n_segments else
-                                            f'{choice.reason}; refined to N = {n}', choice.cost)
+        # What copy.copy does for these plain classes, in a quarter of its time.
+        labelled = object.__new__(type(result))
+        labelled.__dict__.update(result.__dict__)
+        labelled.model_choice = choice if n == choice.n_segments else ModelChoice(
+            choice.rung, n, choice.predicted_error, f'{choice.reason}; refined to N = {n}',
+            choice.cost)
         return labelled
 
     def rigidity(self, pressure=0.0, axis='x', displacement=0.010, initial=None):

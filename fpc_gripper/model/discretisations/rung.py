@@ -208,8 +208,8 @@ class RungSolver:
         """
         pressure, force = check_load(pressure, tip_force, self.design.max_pressure)
         force = np.array(force)
-        if initial is not None and not (isinstance(initial, self._result_type)
-                                        and initial.solver._compatible(self)):
+        if initial is not None and not (isinstance(initial, self._result_type) and (
+                initial.solver is self or initial.solver._compatible(self))):
             raise ValueError(f'`initial` must be None or a {self._result_type.__name__} of a '
                              'solver with the same discretisation')
         # Beyond UNIQUE_LOAD a warm start could pick another stable branch: start cold.

@@ -175,7 +175,7 @@ def _own(x, problem):
 
 
 def _no_start(problem, flat):
-    """The entries' `initial` of a cold scene: no rows."""
+    """Return the entries' `initial` of a cold scene: no rows."""
     memo = _derived(problem)
     if memo['none'] is None:
         memo['none'] = np.zeros((0,) + flat.shape)
@@ -183,7 +183,7 @@ def _no_start(problem, flat):
 
 
 def _scene(out):
-    """The `NewtonOutcome` of a one-scene `_solve_entry`."""
+    """Return the `NewtonOutcome` of a one-scene `_solve_entry`."""
     states, status, iterations, figures = out
     return NewtonOutcome(states[0], _STATUS[int(status[0])], int(iterations[0]),
                          *figures[0, :4].tolist())
