@@ -1,22 +1,36 @@
 """ROS-free physics core: the chained composite model (CCM) of an FPC finger."""
 
-from .analysis import CircleFit, fit_circle, flexural_rigidity
-from .design import ActuatorDesign, PAPER_MATERIALS
-from .discretisations.arc import ArcSolver
-from .discretisations.ccm import CCMResult, CCMSolver, RigidityResult, SolverStatus
-from .discretisations.pcc import PCCResult, PCCSolver
-from .discretisations.rod import RodSolver
-from .discretisations.rung import ArcResult, LadderResult, RodResult
-from .section.law import build_section_law, section_minimiser, SectionLaw, station_layout
-from .section.materials import default_emc_coefficients, fit_emc_polynomial, Material
-from .selection import AdaptiveSolver, choose_model, ModelChoice, RUNGS, Scene
-from .validation import PRESSURE_MODEL_NAMES, PRESSURE_MODELS
+import importlib
 
-__all__ = [
-    'ActuatorDesign', 'AdaptiveSolver', 'ArcResult', 'ArcSolver', 'CCMResult', 'CCMSolver',
-    'CircleFit', 'LadderResult', 'Material', 'ModelChoice', 'PAPER_MATERIALS', 'PCCResult',
-    'PCCSolver', 'PRESSURE_MODEL_NAMES', 'PRESSURE_MODELS', 'RUNGS', 'RigidityResult',
-    'RodResult', 'RodSolver', 'Scene', 'SectionLaw', 'SolverStatus', 'build_section_law',
-    'choose_model', 'default_emc_coefficients', 'fit_circle', 'fit_emc_polynomial',
-    'flexural_rigidity', 'section_minimiser', 'station_layout',
-]
+# Each public name from the module that defines it, imported at first use (PEP 562): a
+# process that needs a design or an input check (the regulator bridge, a config tool) does
+# not load numba and the compiled engine with them.
+_HOMES = {
+    '.analysis': ('CircleFit', 'fit_circle', 'flexural_rigidity'),
+    '.design': ('ActuatorDesign', 'PAPER_MATERIALS'),
+    '.discretisations.arc': ('ArcSolver',),
+    '.discretisations.ccm': ('CCMResult', 'CCMSolver', 'RigidityResult', 'SolverStatus'),
+    '.discretisations.pcc': ('PCCResult', 'PCCSolver'),
+    '.discretisations.rod': ('RodSolver',),
+    '.discretisations.rung': ('ArcResult', 'LadderResult', 'RodResult'),
+    '.section.law': ('build_section_law', 'section_minimiser', 'SectionLaw', 'station_layout'),
+    '.section.materials': ('default_emc_coefficients', 'fit_emc_polynomial', 'Material'),
+    '.selection': ('AdaptiveSolver', 'choose_model', 'ModelChoice', 'RUNGS', 'Scene'),
+    '.validation': ('PRESSURE_MODEL_NAMES', 'PRESSURE_MODELS'),
+}
+_HOME = {name: module for module, names in _HOMES.items() for name in names}
+
+__all__ = sorted(_HOME)
+
+
+def __getattr__(name):
+    module = _HOME.get(name)
+    if module is None:
+        raise AttributeError(f'module {__name__!r} has no attribute {name!r}')
+    value = getattr(importlib.import_module(module, __name__), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__():
+    return sorted(set(globals()) | set(__all__))
