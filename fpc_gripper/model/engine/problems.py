@@ -35,6 +35,13 @@ class CompiledProblem:
         self._flat = np.ascontiguousarray(flat, dtype=float)
         self.gradient_scale = float(gradient_scale)
         self._hooks = (hooks_of(type(unloaded)), hooks_of(type(loaded)))
+        #: What the engine derives from it once (`engine.solves._derived`).
+        self.derived = self.new_memo()
+
+    @staticmethod
+    def new_memo():
+        """Return an empty memo of what the engine derives from a problem."""
+        return {'flat': None, 'packed': {}, 'lists': {}, 'none': None, 'frames': {}}
 
     def flat(self):
         """Return the unstrained state (shared: copy it before writing)."""

@@ -138,15 +138,40 @@ _SCENE = np.zeros(1, dtype=np.int64)
 #: keys, so a solver's entry goes with it.
 _DERIVED = weakref.WeakKeyDictionary()
 _DERIVED_LOCK = threading.Lock()
+#: Options memoised per problem before the memo starts again (they are keyed by identity).
+_MEMO_LIMIT = 32
 
 
 def _derived(problem):
+    if type(problem) is CompiledProblem:
+        # The engine's own object carries its memo: no weak reference built per call.
+        return problem.derived
     memo = _DERIVED.get(problem)
     if memo is None:
         with _DERIVED_LOCK:
-            memo = _DERIVED.setdefault(problem, {'flat': None, 'packed': {}, 'lists': {},
-                                                 'none': None})
+            memo = _DERIVED.setdefault(problem, CompiledProblem.new_memo())
     return memo
+
+
+def _frame(problem, options, loaded):
+    """
+    Return what a one-scene `solve` passes besides its scene, once per solver and options.
+
+    (options, flat, packed options, step cap, the one-item data list or None, the empty
+    `initial` of a cold scene): one memo lookup on the per-command path instead of four.
+    """
+    frames = _derived(problem)['frames']
+    key = (id(options), loaded)
+    hit = frames.get(key)
+    if hit is None or hit[0] is not options:
+        flat = _flat(problem)
+        opts, cap = _packed(problem, options, flat.shape)
+        datas = _one(problem, loaded)
+        none = _no_start(problem, flat) if datas is not None else None
+        if len(frames) >= _MEMO_LIMIT:
+            frames.clear()  # a caller that builds its options per call must not grow it
+        hit = frames[key] = (options, flat, opts, cap, datas, none)
+    return hit
 
 
 def _packed(problem, options, shape):
@@ -155,6 +180,8 @@ def _packed(problem, options, shape):
     memo = _derived(problem)['packed']
     hit = memo.get(key)
     if hit is None or hit[0] is not options:
+        if len(memo) >= _MEMO_LIMIT:
+            memo.clear()
         hit = memo[key] = (options, *options.packed(problem.gradient_scale, shape))
     return hit[1], hit[2]
 
@@ -185,8 +212,9 @@ def _no_start(problem, flat):
 def _scene(out):
     """Return the `NewtonOutcome` of a one-scene `_solve_entry`."""
     states, status, iterations, figures = out
-    return NewtonOutcome(states[0], _STATUS[int(status[0])], int(iterations[0]),
-                         *figures[0, :4].tolist())
+    grad, step, eig, fraction = figures[0, :4].tolist()
+    return NewtonOutcome(states[0], _STATUS[status.item()], iterations.item(), grad, step, eig,
+                         fraction)
 
 
 def _outcome(out, problem, fraction=1.0):
@@ -269,18 +297,15 @@ def solve(problem, pressure, loads, options, initial=None):
         fraction of the loading reached.
 
     """
-    flat = _flat(problem)
+    _, flat, opts, cap, datas, none = _frame(problem, options, bool(loads))
     warm = initial is not None
     start = np.ascontiguousarray(initial, dtype=float) if warm else flat
     nodes, forces = load_arrays(loads)
-    opts, cap = _packed(problem, options, flat.shape)
-    datas = _one(problem, bool(loads))
     if datas is None:
         return _outcome(_solve(problem, start, warm, flat, pressure, nodes, forces, opts, cap),
                         problem)
     return _scene(_solve_entry(datas, _SCENE, np.array((float(pressure),)), nodes, forces[None],
-                               start[None] if warm else _no_start(problem, flat), flat, opts,
-                               cap, -1, False))
+                               start[None] if warm else none, flat, opts, cap, -1, False))
 
 
 def rigidity(problem, unloaded_x, pressure, node, direction, displacement, options):
