@@ -484,8 +484,11 @@ class AdaptiveSolver:
         self.pressure_model = check_pressure_model(pressure_model)
         self.max_segments = int(max_segments)
         self._model = load_error_model() if error_model is None else error_model
-        # Built here so that the first solve does not pay for the unloaded feature table.
-        scene_turning(Scene(design, 0.0, (0.0, 0.0), pressure_model), self._model)
+        # `scene_turning`'s feature, held: a solve then hashes no design. Built here so that
+        # the first solve does not pay for the unloaded feature table.
+        self._feature = _arc_feature(design, self.pressure_model,
+                                     float(self._model['ranges']['pressure'][1]))
+        self._feature.turning(0.0, (0.0, 0.0))
         self._solvers = {}
         self._choices = {}
 
@@ -496,7 +499,7 @@ class AdaptiveSolver:
         Choices are cached per error-model cell, which the choice is a function of.
         """
         scene = Scene(self.design, pressure, tuple(tip_force), self.pressure_model)
-        return self._choice(scene, scene_turning(scene, self._model))
+        return self._choice(scene, self._feature.turning(scene.pressure, scene.tip_force))
 
     def choose_many(self, pressures, tip_forces):
         """Return `choose` of many scenes; their loaded arc features are solved as a batch."""
@@ -504,9 +507,8 @@ class AdaptiveSolver:
                   for p, f in zip(pressures, tip_forces)]
         if not scenes:
             return []
-        feature = _arc_feature(self.design, self.pressure_model,
-                               float(self._model['ranges']['pressure'][1]))
-        turnings = feature.turnings([s.pressure for s in scenes], [s.tip_force for s in scenes])
+        turnings = self._feature.turnings([s.pressure for s in scenes],
+                                          [s.tip_force for s in scenes])
         return [self._choice(scene, turning) for scene, turning in zip(scenes, turnings)]
 
     def _choice(self, scene, turning):

@@ -116,6 +116,12 @@ def real_pair(name, value, unit):
         If `value` is not two finite real numbers.
 
     """
+    if type(value) is tuple and len(value) == 2:
+        first, second = value
+        # Two finite Python floats: what every solve after the first passes on.
+        if type(first) is float and type(second) is float and math.isfinite(first) \
+                and math.isfinite(second):
+            return value
     if not (isinstance(value, tuple) and len(value) == 2) and np.shape(value) != (2,):
         raise ValueError(f'`{name}` must be a pair of real numbers {unit}, got '
                          f'{brief(value)}')
