@@ -6,10 +6,12 @@ Launch the gripper: regulator_bridge, model_node and gripper_controller (and mca
         [record_path:=FILE_OR_DIR] [use_sim_time:=true] [frame_prefix:=PREFIX]
         [autostart:=true|false]
 
-The regulator bridge is a lifecycle node, configured and activated the launch way: it
-starts with auto_activate false, launch asks it to configure, and when it reports
-'inactive' launch asks it to activate (autostart:=false leaves both to you, e.g.
-``ros2 lifecycle set``). Every node reads share/fpc_gripper/config/<node>.yaml, then
+The regulator bridge is a lifecycle node. With autostart (the default) it configures and
+activates itself as it starts (auto_activate), in its own process: no round trip through
+its lifecycle services, whose discovery took about 2 s of the start-up; a configuration it
+cannot activate ends it with exit code 2 (invalid) or 1 (device unreachable), which launch
+reports. autostart:=false starts it unconfigured, for a lifecycle manager or ``ros2
+lifecycle set``. Every node reads share/fpc_gripper/config/<node>.yaml, then
 params_file, then the launch arguments. Nothing is imported from launch until
 generate_launch_description() runs, so the file imports without launch installed.
 """
@@ -18,36 +20,22 @@ generate_launch_description() runs, so the file imports without launch installed
 def generate_launch_description():
     """Return the launch description of the gripper."""
     from launch import LaunchDescription
-    from launch.actions import EmitEvent, OpaqueFunction, RegisterEventHandler
-    from launch.events import matches_action
+    from launch.actions import OpaqueFunction
     from launch_ros.actions import LifecycleNode, Node
-    from launch_ros.event_handlers import OnStateTransition
-    from launch_ros.events.lifecycle import ChangeState
-    from lifecycle_msgs.msg import Transition
 
     from fpc_gripper.launch_support import arguments, node_parameters
 
     def nodes(context):
         value = context.launch_configurations.get
         namespace = value('namespace', '')
-        bridge = LifecycleNode(
-            package='fpc_gripper', executable='regulator_bridge', name='regulator_bridge',
-            namespace=namespace, output='screen',
-            parameters=node_parameters(context, 'regulator_bridge', backend=value('backend'),
-                                       modbus_config=value('modbus_config') or None,
-                                       auto_activate=False))
-        actions = [bridge]
-        if value('autostart', 'true').lower() in ('true', '1', 'yes'):
-            def change(transition):
-                return EmitEvent(event=ChangeState(lifecycle_node_matcher=matches_action(bridge),
-                                                   transition_id=transition))
-            actions += [
-                RegisterEventHandler(OnStateTransition(
-                    target_lifecycle_node=bridge, start_state='configuring',
-                    goal_state='inactive', entities=[change(Transition.TRANSITION_ACTIVATE)],
-                    handle_once=True)),
-                change(Transition.TRANSITION_CONFIGURE)]
-        actions += [
+        autostart = value('autostart', 'true').lower() in ('true', '1', 'yes')
+        actions = [
+            LifecycleNode(
+                package='fpc_gripper', executable='regulator_bridge', name='regulator_bridge',
+                namespace=namespace, output='screen',
+                parameters=node_parameters(context, 'regulator_bridge', backend=value('backend'),
+                                           modbus_config=value('modbus_config') or None,
+                                           auto_activate=autostart)),
             Node(package='fpc_gripper', executable='model_node', name='model_node',
                  namespace=namespace, output='screen',
                  parameters=node_parameters(context, 'model_node')),
