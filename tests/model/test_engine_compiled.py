@@ -3,6 +3,7 @@
 import copy
 import importlib
 import pathlib
+import re
 
 from helpers import deviation, fd_derivative
 import numba
@@ -350,8 +351,8 @@ ENTRIES = ('_solve_entry', '_rigidity_entry', '_contact_entry')
 
 
 @pytest.mark.parametrize('entry', ENTRIES)
-def test_cache_stamp_covers_every_model_source(entry):
-    # Each entry inlines kernels of other modules: its stamp is the whole model's content.
+def test_cache_stamp_covers_every_compiled_source(entry):
+    # Each entry inlines kernels of other modules: its stamp is all of their content.
     dispatcher = getattr(engine.solves, entry)
     assert dispatcher._cache._cache_file._source_stamp == compiled.sources_stamp(MODEL)
     assert isinstance(dispatcher._cache, compiled._Cache)
@@ -367,13 +368,31 @@ def test_the_stamp_follows_content_not_mtimes(tmp_path):
         target.parent.mkdir(parents=True, exist_ok=True)
         target.write_bytes(path.read_bytes())
     assert compiled.sources_stamp(copy_dir) == compiled.sources_stamp(MODEL)
-    # The build's driver chooses what is compiled, not how: it is not stamped.
-    driver = copy_dir / 'build.py'
-    driver.write_bytes(driver.read_bytes() + b'# edited\n')
-    assert compiled.sources_stamp(copy_dir) == compiled.sources_stamp(MODEL)
-    kernel = copy_dir / 'kernels' / 'pcc.py'
-    kernel.write_bytes(kernel.read_bytes() + b'# edited\n')
-    assert compiled.sources_stamp(copy_dir) != compiled.sources_stamp(MODEL)
+    # Python around the compiled calls (the build's driver, the default model's choice,
+    # the batches' bookkeeping) is not stamped: an edit there keeps the build.
+    for name in ('build.py', 'selection.py', 'batch.py', 'pipeline.py'):
+        source = copy_dir / name
+        source.write_bytes(source.read_bytes() + b'# edited\n')
+        assert compiled.sources_stamp(copy_dir) == compiled.sources_stamp(MODEL), name
+    # Each place compiled code comes from is: one byte of a comment changes the stamp.
+    for name in ('compiled.py', 'kernels/pcc.py', 'engine/newton.py', 'discretisations/ccm.py'):
+        source = copy_dir / name
+        before = compiled.sources_stamp(copy_dir)
+        source.write_bytes(source.read_bytes() + b'# edited\n')
+        assert compiled.sources_stamp(copy_dir) != before, name
+
+
+def test_only_stamped_sources_hold_compiled_code():
+    # A jitted function outside COMPILED_FROM would go stale unnoticed: the text of every
+    # other model source is searched for numba's decorators.
+    marks = re.compile(r'^\s*@(\w+\.)*(jit|_jit|njit|register_jitable|overload\w*|jitclass)\b',
+                       re.MULTILINE)
+    outside = [path.relative_to(MODEL).as_posix() for path in sorted(MODEL.rglob('*.py'))
+               if path.relative_to(MODEL).parts[0] not in compiled.COMPILED_FROM
+               and marks.search(path.read_text())]
+    assert outside == []
+    inside = [path for path in (MODEL / 'kernels').glob('*.py') if marks.search(path.read_text())]
+    assert len(inside) >= 8                      # the search itself finds the kernels' marks
 
 
 def test_cache_index_goes_stale_when_a_kernel_source_changes():
