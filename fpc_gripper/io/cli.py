@@ -233,6 +233,9 @@ class ReplayReport:
         Finger topic prefixes replayed.
     outputs : dict of str to int
         Messages written per topic.
+    undecodable : list of Undecodable
+        Input messages whose payload could not be decoded, skipped (with
+        ``skip_undecodable``).
 
     """
 
@@ -244,6 +247,7 @@ class ReplayReport:
     rigidity_solves: int = 0
     fingers: list = dataclasses.field(default_factory=list)
     outputs: dict = dataclasses.field(default_factory=dict)
+    undecodable: list = dataclasses.field(default_factory=list)
 
 
 class _Finger:
@@ -308,7 +312,8 @@ def _progress_printer(stream, every_s=1.0):
 
 def replay_model(in_path, out_path, *, config=None, settings=None, source='auto',
                  rigidity=True, rigidity_period=0.0, stale_after_s=None, frame_prefix='',
-                 copy_inputs=False, compression='zstd', overwrite=False, progress=None):
+                 copy_inputs=False, compression='zstd', overwrite=False, progress=None,
+                 skip_undecodable=False):
     """
     Run the model node's finger pipeline over recorded inputs; write its outputs.
 
@@ -376,7 +381,7 @@ def replay_model(in_path, out_path, *, config=None, settings=None, source='auto'
     designs = {f.name: f.design for f in gripper.fingers}
     atmospheric = float(getattr(gripper, 'atmospheric_pressure', DEFAULT_ATMOSPHERIC_PRESSURE))
     report = ReplayReport()
-    with Recording(in_path) as mcap_file:
+    with Recording(in_path, skip_undecodable=skip_undecodable) as mcap_file:
         chosen = _select_inputs(mcap_file, source)
         unknown = sorted({name for _, name in chosen} - set(designs))
         if unknown:
@@ -424,6 +429,7 @@ def replay_model(in_path, out_path, *, config=None, settings=None, source='auto'
         if progress is not None:
             progress(report.inputs, total, final=True)
         report.clipped = sum(state.clamped for state in core.fingers)
+        report.undecodable = mcap_file.undecodable
     report.outputs = dict(sorted(report.outputs.items()))
     return report
 
@@ -599,6 +605,7 @@ def build_parser():
 
 
 def _run(args, out, err):
+    skipped = []
     if args.command == 'info':
         with Recording(args.input) as f:
             info = file_info(f)
@@ -610,7 +617,7 @@ def _run(args, out, err):
         from .plots import make_plots
         if args.output.exists() and not args.output.is_dir():
             raise McapInputError(f'{args.output}: exists and is not a directory')
-        with Recording(args.input) as f:
+        with Recording(args.input, skip_undecodable=True) as f:
             created = not args.output.exists()
             args.output.mkdir(parents=True, exist_ok=True)
             try:
@@ -621,11 +628,13 @@ def _run(args, out, err):
                 if created:
                     shutil.rmtree(args.output, ignore_errors=True)
                 raise
+            skipped = f.undecodable
         for path in written:
             print(path, file=out)
     elif args.command == 'export-csv':
-        with Recording(args.input) as f:
+        with Recording(args.input, skip_undecodable=True) as f:
             written = export_csv(f, args.output, topics=args.topics)
+            skipped = f.undecodable
         for path in written.values():
             print(path, file=out)
     elif args.command == 'recover':
@@ -653,12 +662,30 @@ def _run(args, out, err):
                               rigidity_period=args.rigidity_period,
                               stale_after_s=args.stale_after, frame_prefix=args.frame_prefix,
                               copy_inputs=args.copy_inputs, compression=args.compression,
-                              overwrite=args.force, progress=progress)
+                              overwrite=args.force, progress=progress, skip_undecodable=True)
+        skipped = report.undecodable
         print(f'replayed {report.inputs} inputs of {", ".join(report.fingers)}: '
               f'{report.solves} solves, {report.failures} not converged, '
               f'{report.rejected} rejected, {report.clipped} below atmospheric '
               f'-> {args.output}', file=out)
-    return 0
+    return _report_skipped(args.command, skipped, err)
+
+
+#: Undecodable messages named one by one on stderr; the rest are counted.
+_NAMED_SKIPS = 20
+
+
+def _report_skipped(command, skipped, err):
+    """Name the messages a command skipped as undecodable; its exit code (0, or 3)."""
+    if not skipped:
+        return 0
+    print(f'fpc-mcap {command}: warning: skipped {len(skipped)} undecodable '
+          f'message{"s" * (len(skipped) != 1)}, every other one was read:', file=err)
+    for bad in skipped[:_NAMED_SKIPS]:
+        print(f'  {bad}', file=err)
+    if len(skipped) > _NAMED_SKIPS:
+        print(f'  ... and {len(skipped) - _NAMED_SKIPS} more', file=err)
+    return 3
 
 
 def main(argv=None):
@@ -673,7 +700,9 @@ def main(argv=None):
     Returns
     -------
     int
-        0 on success, 1 for bad input (a message on stderr), 2 for bad usage.
+        0 on success, 1 for bad input (a message on stderr), 2 for bad usage, 3 when
+        ``plot``, ``export-csv`` or ``replay-model`` finished but skipped messages whose
+        payload could not be decoded (each named on stderr, by topic and log time).
 
     """
     parser = build_parser()

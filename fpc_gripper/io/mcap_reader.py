@@ -24,7 +24,7 @@ from .mcap_writer import atomic_mcap_writer, MESSAGE_ENCODING, SCHEMA_ENCODING
 __all__ = [
     'CorruptFileError', 'McapFile', 'McapInputError', 'MissingSchemaError',
     'RecordedMessage', 'Recording', 'RecoveryReport', 'TopicInfo', 'TruncatedFileError',
-    'UnknownTopicError', 'recording_files', 'recover',
+    'Undecodable', 'UnknownTopicError', 'recording_files', 'recover',
 ]
 
 _MAGIC = bytes((137, 77, 67, 65, 80, 48, 13, 10))
@@ -139,6 +139,33 @@ class RecordedMessage:
     ros_msg: object = None
 
 
+@dataclasses.dataclass(frozen=True)
+class Undecodable:
+    """
+    A message whose payload the CDR decoder rejected, skipped by a reader told to go on.
+
+    Attributes
+    ----------
+    topic : str
+    log_time : int
+        Receive time [ns].
+    sequence : int
+    error : str
+        What the decoder raised, on one line.
+
+    """
+
+    topic: str
+    log_time: int
+    sequence: int
+    error: str
+
+    def __str__(self):
+        seconds, nanoseconds = divmod(self.log_time, 1_000_000_000)
+        return (f'{self.topic} at log time {seconds}.{nanoseconds:09d} s (sequence '
+                f'{self.sequence}): {self.error}')
+
+
 class _TopicChecks:
     """Checks of a topic list against a recording's `_topics` (TopicInfo by name)."""
 
@@ -204,6 +231,9 @@ class McapFile(_TopicChecks):
     ----------
     path : str or os.PathLike
         The file.
+    skip_undecodable : bool
+        A payload the decoder rejects: skipped and listed in `undecodable` when True,
+        else (the default) a `CorruptFileError` that names its topic and log time.
 
     Raises
     ------
@@ -214,8 +244,11 @@ class McapFile(_TopicChecks):
 
     """
 
-    def __init__(self, path):
+    def __init__(self, path, skip_undecodable=False):
         self.path = pathlib.Path(path)
+        self.skip_undecodable = bool(skip_undecodable)
+        #: The `Undecodable` messages skipped so far, in the order met.
+        self.undecodable = []
         try:
             self._stream = _SizedFile(self.path)
         except FileNotFoundError:
@@ -334,8 +367,9 @@ class McapFile(_TopicChecks):
         UnknownTopicError, MissingSchemaError
             Before the first message, for a bad topic list.
         CorruptFileError
-            For a schema that cannot be parsed (before the first message), or when a
-            damaged chunk or message is met.
+            For a schema that cannot be parsed (before the first message), when a damaged
+            chunk or message record is met, or for a payload the decoder rejects unless
+            the file skips those (`skip_undecodable`).
 
         """
         topics = list(self._topics) if topics is None else list(topics)
@@ -346,7 +380,16 @@ class McapFile(_TopicChecks):
             for schema, channel, message in self._reader.iter_messages(topics=topics):
                 ros_msg = None
                 if decode:
-                    ros_msg = decoders[channel.id](message.data)
+                    try:
+                        ros_msg = decoders[channel.id](message.data)
+                    except _PARSE_ERRORS as err:
+                        bad = Undecodable(channel.topic, message.log_time, message.sequence,
+                                          _one_line(err))
+                        if not self.skip_undecodable:
+                            raise CorruptFileError(
+                                f'{self.path}: undecodable payload of {bad}') from None
+                        self.undecodable.append(bad)
+                        continue
                 yield RecordedMessage(
                     topic=channel.topic, type_name=schema.name if schema else '',
                     log_time=message.log_time, publish_time=message.publish_time,
@@ -445,6 +488,8 @@ class Recording(_TopicChecks):
     ----------
     path : str or os.PathLike
         See `recording_files`.
+    skip_undecodable : bool
+        As `McapFile`'s: skip (and list) payloads the decoder rejects instead of failing.
 
     Raises
     ------
@@ -453,13 +498,13 @@ class Recording(_TopicChecks):
 
     """
 
-    def __init__(self, path):
+    def __init__(self, path, skip_undecodable=False):
         self.path = pathlib.Path(path)
         self.files = recording_files(self.path)
         self._parts = []
         try:
             for file in self.files:
-                self._parts.append(McapFile(file))
+                self._parts.append(McapFile(file, skip_undecodable=skip_undecodable))
         except BaseException:
             self.close()
             raise
@@ -505,6 +550,12 @@ class Recording(_TopicChecks):
     def schema(self, topic):
         """Return the Schema record of a topic (from the first file that has it), or None."""
         return next((s for s in (p.schema(topic) for p in self._parts) if s is not None), None)
+
+    @property
+    def undecodable(self):
+        """The `Undecodable` messages skipped so far, of every file, in log-time order."""
+        return sorted((bad for part in self._parts for bad in part.undecodable),
+                      key=lambda bad: bad.log_time)
 
     def messages(self, topics=None, decode=True):
         """

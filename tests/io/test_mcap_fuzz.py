@@ -119,9 +119,10 @@ def check(command, data, extra=(), valid=None):
     """
     Run one command on `data`; assert the invariant; return the exit code.
 
-    Either exit 0 and `valid(output, stdout)` holds, or exit 1 with one line on stderr,
-    ``fpc-mcap <command>: error: <the file's path>...``, and nothing left behind: no
-    output and no temporary file beside it.
+    Either exit 0 and `valid(output, stdout)` holds; or exit 3 (a payload the decoder
+    rejected, skipped), `valid` holds and stderr names every skipped message; or exit 1
+    with one line on stderr, ``fpc-mcap <command>: error: <the file's path>...``, and
+    nothing left behind: no output and no temporary file beside it.
     """
     with tempfile.TemporaryDirectory() as tmp:
         tmp = pathlib.Path(tmp)
@@ -133,6 +134,16 @@ def check(command, data, extra=(), valid=None):
         event(f'exit {code}')
         if code == 0:
             assert not stderr.strip() or command == 'replay-model', stderr
+            if valid is not None:
+                valid(output, stdout)
+        elif code == 3:
+            assert command in ('export-csv', 'plot', 'replay-model'), (code, stderr)
+            count = re.search(rf'^fpc-mcap {command}: warning: skipped (\d+) undecodable',
+                              stderr, re.MULTILINE)
+            assert count, stderr
+            named = [line for line in stderr.splitlines() if ' at log time ' in line]
+            assert len(named) == min(int(count[1]), 20), stderr
+            assert 'Traceback' not in stderr
             if valid is not None:
                 valid(output, stdout)
         else:
