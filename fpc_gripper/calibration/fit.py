@@ -199,7 +199,7 @@ class _Problem:
         key = ('solve', pressure, float(force[0]), float(force[1]))
         scene = model['scenes'].get(key)
         if scene is None:
-            result = solver.solve(pressure, force)
+            result = solver.solve(pressure, force, outputs='tip')
             if not result.success:
                 raise _ModelFailure(CalibrationStatus.MODEL_FAILED,
                                     f'no equilibrium at {pressure:g} Pa, tip force '

@@ -660,7 +660,7 @@ class GripperControlLaw:
         """
         model = self.models[index]
         solver = FingerGrasp.solver_of(model.design, model.settings)
-        free = solver.solve(min(max(pressure, 0.0), model.max_pressure))
+        free = solver.solve(min(max(pressure, 0.0), model.max_pressure), outputs='tip')
         if not free.success:
             raise RuntimeError(f'finger {index}: no free state at {pressure:.0f} Pa: '
                                f'{free.message}')

@@ -205,7 +205,7 @@ class InverseModel:
         self._grid_results = []
         previous = None
         for p in self.grid_pressure:
-            r = self.solver.solve(float(p), initial=previous)
+            r = self.solver.solve(float(p), initial=previous, outputs='tip')
             self.nfev += 1
             if not r.success:
                 raise ValueError(f'`design` cannot be solved unloaded at {p:.0f} Pa: {r.message}')
@@ -248,14 +248,15 @@ class InverseModel:
 
         Returns
         -------
-        CCMResult or LadderResult
-            The finger pipeline's result (with `model_choice` for an adaptive model).
+        Result
+            The finger pipeline's result, its outputs to the tip (`model_choice` for an
+            adaptive model).
 
         """
         pressure = real_number('pressure', pressure, '[Pa]')
         tip_force = _force(tip_force)
         result = self.solver.solve(pressure, tip_force=tip_force,
-                                   initial=self._initial(pressure))
+                                   initial=self._initial(pressure), outputs='tip')
         self.nfev += 1
         return result
 
@@ -320,10 +321,14 @@ class InverseModel:
         if not reference.success:
             raise RuntimeError(f'finger model failed at {pressure} Pa, tip force ({f0}, {p0}) '
                                f'N: {reference.message}')
-        fixed = reference.solver
+        # The finite differences stay on the reference's rung and N, wherever the model
+        # would choose another.
+        choice = reference.model_choice
+        fixed = self.solver if choice is None else self.solver.solver_for(choice.rung,
+                                                                          choice.n_segments)
 
         def rho(p, force):
-            result = fixed.solve(p, force, initial=reference)
+            result = fixed.solve(p, force, initial=reference, outputs='tip')
             self.nfev += 1
             if not result.success:
                 raise RuntimeError(f'finger model failed at {p} Pa, tip force {force} N: '

@@ -135,7 +135,8 @@ def peak_strain(result, design):
 
     Parameters
     ----------
-    result : CCMResult or LadderResult
+    result : Result
+        A finger's solve.
     design : ActuatorDesign
 
     Returns
@@ -143,16 +144,16 @@ def peak_strain(result, design):
     float
 
     """
-    strains = getattr(result, 'strains', None)
+    strains = result.strains
     if strains is not None:
         eps, kappa = strains[:, 0], strains[:, 1]
     else:
-        solver = result.solver
-        q = result.q
-        if solver.reconstruction == 'consistent':
+        q = result.state
+        lengths = np.diff(result.segment_edges)
+        if result.rung != 'ccm':
             q = consistent_strain_map(q)[0]
-        c = from_scaled(q, solver.segments.lengths)
-        x2 = np.stack([np.zeros(len(c)), solver.segments.lengths ** 2], axis=1)
+        c = from_scaled(q, lengths)
+        x2 = np.stack([np.zeros(len(c)), lengths ** 2], axis=1)
         eps = (c[:, :1] + (3.0 * c[:, 1:2] + 2.0 * c[:, 3:4] ** 2) * x2).ravel()
         kappa = np.repeat(2.0 * c[:, 3], 2)
     pemc = [design.prestrain + eps - z * kappa for z in (-design.H / 2, -design.h3)]

@@ -102,7 +102,8 @@ def solve_designs(designs, pressures, settings, rigidity=(), displacement=0.010)
 def _solve_block(out, designs, valid, pressures, settings, rigidity, displacement):
     """Fill the rows of designs `valid` (indices into `designs`) in the columns `out`."""
     n_p = pressures.size
-    grid = batch.solve_grid([designs[k][0] for k in valid], pressures, settings=settings)
+    grid = batch.solve_grid([designs[k][0] for k in valid], pressures, settings=settings,
+                            outputs='all')
     at = (np.asarray(valid)[:, None] * n_p + np.arange(n_p)).ravel()
     success = grid.success[:, :, 0].ravel()
     status = np.array([_SOLVER_STATUS[int(c)] for c in grid.status[:, :, 0].ravel()],

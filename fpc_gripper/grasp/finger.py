@@ -62,7 +62,7 @@ class FingerGrasp:
 
         Returns
         -------
-        ContactResult
+        Result
 
         Raises
         ------
@@ -91,7 +91,7 @@ class FingerGrasp:
 
     def _free_gap(self, pressure):
         """Smallest gap of the free finger from the object [m] (< 0: it would penetrate)."""
-        free = self.solver.solve(pressure)
+        free = self.solver.solve(pressure, outputs='tip')
         if not free.success:
             raise RuntimeError(f'free finger failed at {pressure:.1f} Pa: {free.message}')
         return float(point_gaps(self.solver, self.solver._pack(free.state), self.section,

@@ -120,7 +120,7 @@ class GraspPoint:
     success : bool
     status : GraspStatus
     message : str
-    contacts : tuple of ContactResult
+    contacts : tuple of Result
         Every finger's contact at the grasp pressure, before the pull.
     pull : ndarray, shape (P,)
         Pull displacements [m].
@@ -251,7 +251,7 @@ def holding_force(starts, sections, solvers, mu, settings=GraspSettings()):
 
     Parameters
     ----------
-    starts : sequence of ContactResult
+    starts : sequence of Result
         Each finger's grasp state, its obstacles at their grasp pose.
     sections : sequence of tuple
         Each finger's obstacles at that pose.

@@ -167,7 +167,7 @@ def shape_message(result, frame_id, stamp_ns):
 
     Parameters
     ----------
-    result : CCMResult
+    result : Result
         Uses ``points`` (M, 2) [m] and, if present, the exact ``tangent`` (M,) [rad].
     frame_id : str
         Finger frame, ``finger_<i>``.
@@ -204,7 +204,7 @@ def curvature_message(result):
 
     Parameters
     ----------
-    result : CCMResult
+    result : Result
         Equilibrium; uses ``curvature`` [1/m].
 
     Returns
@@ -228,7 +228,7 @@ def rigidity_message(k_x, k_z, frame_id, stamp_ns):
 
     Parameters
     ----------
-    k_x, k_z : float, RigidityResult or None
+    k_x, k_z : float, rigidity Result or None
         Flexural rigidities along X and Z [N·m²]; None (not computed) gives NaN.
     frame_id : str
         Finger frame.
@@ -254,7 +254,7 @@ def model_messages(result, frame_id, stamp_ns, rigidity=(None, None)):
 
     Parameters
     ----------
-    result : CCMResult
+    result : Result
         Equilibrium to publish.
     frame_id : str
         Finger frame, ``finger_<i>``.
@@ -312,7 +312,7 @@ def serialized_shape(result, frame_id, stamp_ns):
 
     Parameters
     ----------
-    result : CCMResult
+    result : Result
         As for `shape_message`.
     frame_id : str
         Finger frame, ``finger_<i>``.
@@ -489,7 +489,7 @@ def shape_marker(result, frame_id, stamp_ns, marker_id, color=(0.1, 0.7, 0.2, 1.
 
     Parameters
     ----------
-    result : CCMResult
+    result : Result
         Uses ``points`` (M, 2) [m], drawn at (X, 0, Z) in the finger frame.
     frame_id : str
         The finger frame, or the palm frame when `placement` is given.

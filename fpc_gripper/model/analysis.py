@@ -1,13 +1,12 @@
 """Derived outputs: the geometric circle fit of a midplane and the flexural rigidity formula."""
 
 from dataclasses import dataclass
-import functools
 
 import numpy as np
 
-from .kernels import shapes as shape_kernels
+from .kernels import circle as circle_kernels
 
-__all__ = ['CircleFit', 'CircleFitted', 'fit_circle', 'flexural_rigidity']
+__all__ = ['CircleFit', 'fit_circle', 'flexural_rigidity']
 
 
 @dataclass(frozen=True)
@@ -33,13 +32,13 @@ class CircleFit:
 
 
 def _signed_distances(params, x, z, r2):
-    """Signed orthogonal distances to the circle (A, D, phi) (`shape_kernels`), shape (M,)."""
-    return shape_kernels.signed_distances(np.asarray(params, dtype=float), x, z, r2)
+    """Signed orthogonal distances to the circle (A, D, phi) (`circle_kernels`), shape (M,)."""
+    return circle_kernels.signed_distances(np.asarray(params, dtype=float), x, z, r2)
 
 
 def _distance_jacobian(params, x, z, r2):
     """Exact d(distance)/d(A, D, phi) of `_signed_distances`, shape (M, 3)."""
-    return shape_kernels.distance_jacobian(np.asarray(params, dtype=float), x, z, r2)
+    return circle_kernels.distance_jacobian(np.asarray(params, dtype=float), x, z, r2)
 
 
 def fit_circle(points):
@@ -51,7 +50,7 @@ def fit_circle(points):
     so that a straight line (A = 0) is an ordinary point. The exact orthogonal
     distance is 2 P / (1 + sqrt(1 + 4 A P)) with P the implicit function.
     Pratt's algebraic fit starts the Levenberg-Marquardt refinement. Compiled
-    (`shape_kernels.circle_fit`): the batched sweeps fit their scenes with the same code.
+    (`circle_kernels.circle_fit`): the batched sweeps fit their scenes with the same code.
 
     Parameters
     ----------
@@ -73,26 +72,8 @@ def fit_circle(points):
         raise ValueError(f'`points` must have shape (M >= 3, 2), got {pts.shape}')
     if not np.all(np.isfinite(pts)):
         raise ValueError('`points` must be finite [m]')
-    curvature, rmsd, cx, cz = shape_kernels.circle_fit(np.ascontiguousarray(pts))
+    curvature, rmsd, cx, cz = circle_kernels.circle_fit(np.ascontiguousarray(pts))
     return CircleFit(curvature=float(curvature), rmsd=float(rmsd), center=np.array([cx, cz]))
-
-
-class CircleFitted:
-    """Mixin of a result with `points`: curvature and RMSD of its circle, fitted on first use."""
-
-    @functools.cached_property
-    def _circle(self):
-        return fit_circle(self.points)
-
-    @property
-    def curvature(self):
-        """Signed curvature of the least-squares circle [1/m], > 0 curling towards -Z."""
-        return self._circle.curvature
-
-    @property
-    def fit_rmsd(self):
-        """RMSD of the samples from the fitted circle [m]."""
-        return self._circle.rmsd
 
 
 def flexural_rigidity(force, lever, displacement):

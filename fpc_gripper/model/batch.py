@@ -2,22 +2,43 @@
 
 import functools
 
-import numba
 import numpy as np
 
 from . import engine
 from .analysis import flexural_rigidity
-from .compiled import over_cores
 from .design import ActuatorDesign
-from .discretisations.ccm import (AXES, CCMResult, CCMSolver, check_rigidity, rigidity_result,
-                                  SolverStatus)
-from .discretisations.pcc import PCCSolver
-from .kernels import shapes as shape_kernels
-from .pipeline import finger_model, model_label, ModelSettings, rung_label, solver_label
+from .discretisations.ccm import AXES, check_rigidity, rigidity_result, SolverStatus
+from .pipeline import finger_model, ModelSettings, rung_label, solver_label
+from .result import Result
 from .selection import AdaptiveSolver
-from .validation import check_load
+from .validation import check_load, check_outputs, OUTPUT_LEVELS
 
-__all__ = ['solve_grid', 'rigidity_grid', 'GridResult', 'RigidityGrid', 'check_pressures']
+__all__ = ['solve_grid', 'rigidity_grid', 'check_pressures', 'GRID_FIELDS',
+           'RIGIDITY_GRID_FIELDS']
+
+#: The fields of `solve_grid`'s Result; every array has the grid's shape (D, P, F).
+GRID_FIELDS = {
+    'designs': 'list of ActuatorDesign', 'pressures': '(P,) [Pa]', 'tip_forces': '(F, 2) [N]',
+    'settings': 'ModelSettings', 'shape': '(D, P, F)',
+    'success': 'bool', 'status': '`SolverStatus` codes', 'iterations': 'int',
+    'tip': '(D, P, F, 2) [m]', 'models': "every scene's model, as `pipeline.model_label`",
+    'valid': "the CCM's small-rotation rule, as each result's `valid`",
+    'energy': '[J] (outputs "all", else None)',
+    'curvature': 'signed circle-fit curvature [1/m] (outputs "all", else None)',
+    'fit_rmsd': "RMSD of the samples from the circle [m] (outputs 'all', else None)",
+    'result': 'function (d, p, f=0) -> the full Result of one scene, as its single solve '
+              "returns it with outputs 'all'",
+}
+#: The fields of `rigidity_grid`'s Result; every array has the grid's shape (D, P).
+RIGIDITY_GRID_FIELDS = {
+    'designs': 'list of ActuatorDesign', 'pressures': '(P,) [Pa]', 'axis': "'x' or 'z'",
+    'displacement': '[m]', 'shape': '(D, P)', 'value': 'K_x or K_z [N m^2]; NaN where not found',
+    'force': 'end load that produces the displacement [N]',
+    'lever': 'lever arm in the loaded state [m]', 'success': 'bool',
+    'iterations': 'unloaded plus bordered Newton iterations', 'models': 'str',
+    'result': 'function (d, p) -> the rigidity Result of one scene, as its single call '
+              'returns it',
+}
 
 
 def _designs(designs):
@@ -79,12 +100,16 @@ def _compiled(solver):
     return isinstance(solver.engine_problem, engine.CompiledProblem)
 
 
+#: The level of every single solve a grid makes, and of a scene's `result`.
+_ALL = OUTPUT_LEVELS['all']
+
+
 class _Groups:
     """
     Scenes grouped by the compiled batch that solves them.
 
-    A group has one discretisation type, size and options, and one loading (loaded or
-    not); it lists its distinct solvers.
+    A group has one discretisation type, size, sample count and options, and one loading
+    (loaded or not); it lists its distinct solvers.
     """
 
     def __init__(self):
@@ -95,11 +120,10 @@ class _Groups:
         memo = (id(solver), loaded)
         key = self._keys.get(memo)
         if key is None:
-            problem = solver.engine_problem
-            flat = engine.solves._flat(problem)
-            opts, cap = engine.solves._packed(problem, solver._options, flat.shape)
-            key = self._keys[memo] = (type(problem.data[loaded]), flat.shape, opts,
-                                      cap.tobytes(), loaded, solver.n_segments)
+            key = self._keys[memo] = (engine.batch_key(solver.engine_problem, solver._options,
+                                                       loaded), solver.n_segments,
+                                      getattr(solver, 'samples', None),
+                                      getattr(solver, 'samples_per_segment', None), loaded)
         return key
 
     def add(self, solver, loaded, scenes):
@@ -114,48 +138,19 @@ class _Groups:
 
     def __iter__(self):
         for key, group in self.groups.items():
-            yield key[4], group['solvers'], np.concatenate(group['scenes']), \
+            yield key[-1], group['solvers'], np.concatenate(group['scenes']), \
                 np.concatenate(group['slots'])
 
 
-class GridResult:
-    """
-    Equilibria of every design x pressure x tip force, as arrays of shape (D, P, F).
+class _Grid:
+    """The arrays of a grid as its scenes are solved (`solve_grid` returns them as a Result)."""
 
-    Every scene is solved cold, exactly as ``finger_model(design, settings).solve(p, f)``
-    solves it alone (the same model and arithmetic, so the same answer); only the
-    order of work differs.
-
-    Attributes
-    ----------
-    designs : list of ActuatorDesign
-    pressures : ndarray, shape (P,)
-        [Pa].
-    tip_forces : ndarray, shape (F, 2)
-        [N].
-    settings : ModelSettings
-    success : ndarray of bool, shape (D, P, F)
-    status : ndarray of int, shape (D, P, F)
-        `SolverStatus` codes.
-    iterations : ndarray of int, shape (D, P, F)
-    tip : ndarray, shape (D, P, F, 2)
-        Global (X, Z) of the tip [m].
-    models : ndarray of str, shape (D, P, F)
-        Model of every scene, as `pipeline.model_label` names it.
-    curvature, fit_rmsd : ndarray, shape (D, P, F)
-        Signed curvature [1/m] and RMSD [m] of every scene's circle fit, equal to its
-        result's `curvature` and `fit_rmsd` (the same samples and fit, compiled over
-        both cores); computed on first use.
-    valid : ndarray of bool, shape (D, P, F)
-        Every scene's result's `valid` (the CCM's small-rotation rule).
-
-    """
-
-    def __init__(self, designs, pressures, tip_forces, settings):
+    def __init__(self, designs, pressures, tip_forces, settings, level):
         self.designs = designs
         self.pressures = pressures
         self.tip_forces = tip_forces
         self.settings = settings
+        self.level = level
         self.shape = (len(designs), pressures.size, tip_forces.shape[0])
         count = int(np.prod(self.shape))
         self.success = np.zeros(count, dtype=bool)
@@ -163,104 +158,36 @@ class GridResult:
         self.iterations = np.zeros(count, dtype=np.int64)
         self.tip = np.full((count, 2), np.nan)
         self.models = np.empty(count, dtype=object)
+        self.valid = np.ones(count, dtype=bool)
+        self.figures = np.full((count, 3), np.nan)          # energy, curvature, fit_rmsd
         # Where each scene's full result comes from: a batch row or a single solve.
-        self._batch = np.full(count, -1, dtype=np.int64)
-        self._row = np.zeros(count, dtype=np.int64)
-        self._batches = []
-        self._singles = {}
-        self._models = [None] * len(designs)
-        self._choices = {}
+        self.batch_of = np.full(count, -1, dtype=np.int64)
+        self.row = np.zeros(count, dtype=np.int64)
+        self.batches = []
+        self.singles = {}
+        self.models_of = [None] * len(designs)
+        self.choices = {}
 
-    def _spec(self, scene):
+    def spec(self, scene):
         """(model, choice, pressure [Pa], tip force [N]) of a flat scene index."""
         d, p, f = np.unravel_index(scene, self.shape)
         force = self.tip_forces[f]
-        return (self._models[d], self._choices.get(scene), float(self.pressures[p]),
+        return (self.models_of[d], self.choices.get(scene), float(self.pressures[p]),
                 (float(force[0]), float(force[1])))
 
-    def _finish(self):
-        for name in ('success', 'status', 'iterations', 'models'):
-            setattr(self, name, getattr(self, name).reshape(self.shape))
-        self.tip = self.tip.reshape(self.shape + (2,))
-        return self
-
-    def _single(self, scene, result):
+    def single(self, scene, result):
+        """Store the result of a scene's single solve (made with outputs 'all')."""
         self.success[scene], self.status[scene] = result.success, int(result.status)
         self.iterations[scene], self.tip[scene] = result.iterations, result.tip
-        self.models[scene] = model_label(result)
-        self._singles[scene] = result
-        self._batch[scene] = -1
+        self.models[scene] = result.model
+        self.valid[scene] = result.valid
+        self.figures[scene] = result.energy, result.curvature, result.fit_rmsd
+        self.singles[scene] = result
+        self.batch_of[scene] = -1
 
-    @functools.cached_property
-    def _circles(self):
-        """(curvature, rmsd), shape (D, P, F) each: every scene's samples and circle fit."""
-        out = np.full((self._batch.size, 2), np.nan)
-        for b, (batch, solvers, slots, loaded) in enumerate(self._batches):
-            scenes = np.flatnonzero(self._batch == b)
-            if scenes.size:
-                out[scenes] = self._batch_circles(scenes, batch, solvers, slots)
-        for scene, result in self._singles.items():
-            out[scene] = result.curvature, result.fit_rmsd
-        return out[:, 0].reshape(self.shape), out[:, 1].reshape(self.shape)
-
-    def _batch_circles(self, scenes, batch, solvers, slots):
-        """Circle fits (S, 2) of a batch's scenes: compiled for the CCM and the PCC."""
-        rows = self._row[scenes]
-        solver = solvers[0]
-        if isinstance(solver, CCMSolver) and all(
-                s.samples_per_segment == solver.samples_per_segment for s in solvers):
-            lengths = np.array([s.segments.lengths for s in solvers])
-            states, slots = batch.states[rows], slots[rows]
-            return over_cores(lambda lo, hi: shape_kernels.ccm_circles(
-                states[lo:hi], lengths, slots[lo:hi], solver.samples_per_segment), rows.size)
-        if isinstance(solver, PCCSolver):
-            _, p, f = np.unravel_index(scenes, self.shape)
-            datas = numba.typed.List([s.engine_problem.data[False] for s in solvers])
-            segment = np.array([s._sample_segment for s in solvers])
-            offset = np.array([s._sample_offset for s in solvers])
-            states, slots = batch.states[rows], slots[rows]
-            pressures = self.pressures[p]
-            forces = np.ascontiguousarray(self.tip_forces[f])
-            return over_cores(lambda lo, hi: shape_kernels.pcc_circles(
-                states[lo:hi], datas, segment, offset, slots[lo:hi], pressures[lo:hi],
-                forces[lo:hi]), rows.size)
-        # Another discretisation: each scene's own result.
-        out = np.empty((scenes.size, 2))
-        for k, scene in enumerate(scenes):
-            result = self.result(*np.unravel_index(scene, self.shape))
-            out[k] = result.curvature, result.fit_rmsd
-        return out
-
-    @functools.cached_property
-    def valid(self):
+    def scene_result(self, design, pressure, force=0):
         """
-        Whether every scene's state obeys its model's small-rotation rule, shape (D, P, F).
-
-        As each result's `valid`: |2 d L_i| < 1 in every CCM segment; always True for the
-        geometrically exact rungs.
-        """
-        out = np.ones(self._batch.size, dtype=bool)
-        for b, (batch, solvers, _, _) in enumerate(self._batches):
-            scenes = np.flatnonzero(self._batch == b)
-            if scenes.size and isinstance(solvers[0], CCMSolver):
-                out[scenes] = CCMResult.small_rotations(batch.states[self._row[scenes]])
-        for scene, result in self._singles.items():
-            out[scene] = result.valid
-        return out.reshape(self.shape)
-
-    @property
-    def curvature(self):
-        """Signed circle-fit curvature of every scene [1/m], shape (D, P, F)."""
-        return self._circles[0]
-
-    @property
-    def fit_rmsd(self):
-        """RMSD of every scene's samples from its circle [m], shape (D, P, F)."""
-        return self._circles[1]
-
-    def result(self, design, pressure, force=0):
-        """
-        Return the full result of one scene, as a single solve returns it (built on demand).
+        Return the full Result of one scene, as its single solve returns it (outputs 'all').
 
         Parameters
         ----------
@@ -269,23 +196,36 @@ class GridResult:
 
         """
         scene = int(np.ravel_multi_index((design, pressure, force), self.shape))
-        if scene in self._singles:
-            return self._singles[scene]
-        batch, solvers, slots, loaded = self._batches[self._batch[scene]]
-        k = int(self._row[scene])
-        model, choice, pressure_pa, tip_force = self._spec(scene)
+        if scene in self.singles:
+            return self.singles[scene]
+        batch, solvers, slots, loaded = self.batches[self.batch_of[scene]]
+        k = int(self.row[scene])
+        _, choice, pressure_pa, tip_force = self.spec(scene)
         solver = solvers[slots[k]]
-        loads = [(solver.n_segments, np.array(tip_force))] if loaded else []
-        result = solver._result(batch.states[k], SolverStatus(int(batch.status[k])),
-                                int(batch.iterations[k]), float(batch.gradient[k]),
-                                float(batch.step[k]), float(batch.min_eig[k]),
-                                float(batch.fraction[k]), pressure_pa, loads, tip_force)
-        return result if choice is None else model._labelled(result, choice,
-                                                             choice.n_segments)
+        loads = [(solver.n_segments, np.array([tip_force]))] if loaded else []
+        fields = engine.outputs(solver.engine_problem, batch.states[k:k + 1], [pressure_pa],
+                                loads, _ALL)[0]
+        outcome = engine.NewtonOutcome(batch.states[k], SolverStatus(int(batch.status[k])),
+                                       int(batch.iterations[k]), float(batch.gradient[k]),
+                                       float(batch.step[k]), float(batch.min_eig[k]),
+                                       float(batch.fraction[k]), fields)
+        return solver._result(outcome, pressure_pa, tip_force, model_choice=choice)
 
-    def __repr__(self):
-        return (f'GridResult(shape={self.shape}, success={int(self.success.sum())}/'
-                f'{self.success.size})')
+    def finish(self):
+        """Return the Result (`GRID_FIELDS`)."""
+        shape = self.shape
+        kept = self.level >= _ALL
+        energy, curvature, rmsd = (self.figures[:, k].reshape(shape) if kept else None
+                                   for k in range(3))
+        return Result.of({
+            'designs': self.designs, 'pressures': self.pressures,
+            'tip_forces': self.tip_forces, 'settings': self.settings, 'shape': shape,
+            'success': self.success.reshape(shape), 'status': self.status.reshape(shape),
+            'iterations': self.iterations.reshape(shape), 'tip': self.tip.reshape(shape + (2,)),
+            'models': self.models.reshape(shape), 'valid': self.valid.reshape(shape),
+            'energy': energy, 'curvature': curvature, 'fit_rmsd': rmsd,
+            'result': self.scene_result,
+        })
 
 
 def _choices(model, pressures, forces):
@@ -296,7 +236,8 @@ def _choices(model, pressures, forces):
     return [model] * len(pressures), [None] * len(pressures)
 
 
-def solve_grid(designs, pressures, tip_forces=((0.0, 0.0),), settings=ModelSettings()):
+def solve_grid(designs, pressures, tip_forces=((0.0, 0.0),), settings=ModelSettings(), *,
+               outputs='tip'):
     """
     Solve every design x pressure x tip force on the compiled engine, over both cores.
 
@@ -305,7 +246,9 @@ def solve_grid(designs, pressures, tip_forces=((0.0, 0.0),), settings=ModelSetti
     CCM8). Scenes are grouped by discretisation and solved in compiled batches
     (`engine.solve_batch`); a scene whose adaptive model refines (a CCM rung whose
     first solve fails or breaks the small-rotation rule), or whose model does not run
-    compiled, is finished by the single solve, which does exactly that.
+    compiled, is finished by the single solve, which does exactly that. Every scene is
+    solved cold, exactly as its single solve solves it (the same model and arithmetic,
+    so the same answer); only the order of work differs.
 
     Parameters
     ----------
@@ -315,10 +258,14 @@ def solve_grid(designs, pressures, tip_forces=((0.0, 0.0),), settings=ModelSetti
     tip_forces : array_like, shape (F, 2) or (2,)
         Tip forces (f0, p0) [N].
     settings : ModelSettings
+    outputs : {'tip', 'shape', 'all'}
+        'tip' (the default): the states' tips and validity; 'shape' also the energy;
+        'all' also the circle fit of every scene's samples (in the same compiled calls).
 
     Returns
     -------
-    GridResult
+    Result
+        `GRID_FIELDS`.
 
     Raises
     ------
@@ -327,12 +274,13 @@ def solve_grid(designs, pressures, tip_forces=((0.0, 0.0),), settings=ModelSetti
         argument, value and unit.
 
     """
+    level = check_outputs(outputs)
     designs = _designs(designs)
     pressures = check_pressures(pressures)
     forces = _tip_forces(tip_forces)
     _in_envelope(designs, pressures, forces)
     settings = _settings(settings)
-    out = GridResult(designs, pressures, forces, settings)
+    out = _Grid(designs, pressures, forces, settings, level)
     n_p, n_f = pressures.size, forces.shape[0]
     per_design = n_p * n_f
     scene_p = [float(p) for p in np.repeat(pressures, n_f)]
@@ -340,12 +288,12 @@ def solve_grid(designs, pressures, tip_forces=((0.0, 0.0),), settings=ModelSetti
     scene_loaded = np.tile(np.any(forces != 0.0, axis=1), n_p)
     groups = _Groups()
     for d, design in enumerate(designs):
-        model = out._models[d] = finger_model(design, settings)
+        model = out.models_of[d] = finger_model(design, settings)
         base = d * per_design
         if not isinstance(model, AdaptiveSolver) and not _compiled(model):
             # A fixed rung that does not run compiled (the rod): its own solves.
             for k in range(per_design):
-                out._single(base + k, model.solve(scene_p[k], scene_f[k]))
+                out.single(base + k, model.solve(scene_p[k], scene_f[k]))
             continue
         if not isinstance(model, AdaptiveSolver):
             # One solver for the whole design: its loaded and unloaded scenes as two blocks.
@@ -357,46 +305,44 @@ def solve_grid(designs, pressures, tip_forces=((0.0, 0.0),), settings=ModelSetti
         blocks = {}
         for k, (solver, choice) in enumerate(zip(*_choices(model, scene_p, scene_f))):
             scene = base + k
-            out._choices[scene] = choice
+            out.choices[scene] = choice
             if _compiled(solver):
                 blocks.setdefault((id(solver), bool(scene_loaded[k])), (solver, []))[1] \
                     .append(scene)
             else:
                 # A rung that does not run compiled (the rod): its own solve.
-                out._single(scene, model.solve(scene_p[k], scene_f[k]))
+                out.single(scene, model.solve(scene_p[k], scene_f[k]))
         for (_, loaded), (solver, scenes) in blocks.items():
             groups.add(solver, loaded, scenes)
     for loaded, solvers, index, slots in groups:
         local = index % per_design
         pressure = np.repeat(pressures, n_f)[local]
         force = np.tile(forces, (n_p, 1))[local].reshape(index.size, 1, 2)
-        tip = solvers[0].n_segments
-        nodes = np.array([tip] if loaded else [], dtype=np.int64)
+        nodes = np.array([solvers[0].n_segments] if loaded else [], dtype=np.int64)
         batch = engine.solve_batch([s.engine_problem for s in solvers], slots, pressure, nodes,
-                                   force if loaded else force[:, :0], solvers[0]._options, tip)
-        out._batches.append((batch, solvers, slots, loaded))
-        out._batch[index] = len(out._batches) - 1
-        out._row[index] = np.arange(index.size)
+                                   force if loaded else force[:, :0], solvers[0]._options,
+                                   level=min(level, _ALL))
+        out.batches.append((batch, solvers, slots, loaded))
+        out.batch_of[index] = len(out.batches) - 1
+        out.row[index] = np.arange(index.size)
         out.status[index] = batch.status
         out.success[index] = batch.status == int(SolverStatus.SUCCESS)
         out.iterations[index] = batch.iterations
         out.tip[index] = batch.tips
-        adaptive = [k for k, scene in enumerate(index) if scene in out._choices]
+        out.valid[index] = batch.valid
+        out.figures[index] = np.stack([batch.energy, batch.curvature, batch.fit_rmsd], axis=1)
+        adaptive = [k for k, scene in enumerate(index) if scene in out.choices]
         if len(adaptive) < index.size:
             out.models[index] = solver_label(solvers[0])
-        if not adaptive:
-            continue
-        valid = (CCMResult.small_rotations(batch.states) if isinstance(solvers[0], CCMSolver)
-                 else np.ones(index.size, dtype=bool))
         for k in adaptive:
             scene = index[k]
-            model, choice = out._models[scene // per_design], out._choices[scene]
+            model, choice = out.models_of[scene // per_design], out.choices[scene]
             if model.refines(choice.rung, choice.n_segments,
-                             _Verdict(out.success[scene], valid[k])):
-                out._single(scene, model.solve(*out._spec(scene)[2:]))
+                             _Verdict(out.success[scene], out.valid[scene])):
+                out.single(scene, model.solve(*out.spec(scene)[2:]))
             else:
                 out.models[scene] = rung_label(choice.rung, choice.n_segments)
-    return out._finish()
+    return out.finish()
 
 
 class _Verdict:
@@ -407,33 +353,8 @@ class _Verdict:
         self.valid = bool(valid)
 
 
-class RigidityGrid:
-    """
-    Flexural rigidity of every design x pressure, as arrays of shape (D, P).
-
-    Each scene is ``finger_model(design, settings).rigidity(p, axis, displacement)``
-    solved cold (the same model and arithmetic, so the same answer).
-
-    Attributes
-    ----------
-    designs : list of ActuatorDesign
-    pressures : ndarray, shape (P,)
-        [Pa].
-    axis : {'x', 'z'}
-    displacement : float
-        [m].
-    value : ndarray, shape (D, P)
-        K_x or K_z [N m^2]; NaN where not found.
-    force : ndarray, shape (D, P)
-        End load that produces the displacement [N].
-    lever : ndarray, shape (D, P)
-        Lever arm in the loaded state [m].
-    success : ndarray of bool, shape (D, P)
-    iterations : ndarray of int, shape (D, P)
-        Unloaded plus bordered Newton iterations.
-    models : ndarray of str, shape (D, P)
-
-    """
+class _RigidityGrid:
+    """The arrays of a rigidity grid (`rigidity_grid` returns them as a Result)."""
 
     def __init__(self, designs, pressures, axis, displacement):
         self.designs = designs
@@ -448,26 +369,28 @@ class RigidityGrid:
         self.success = np.zeros(count, dtype=bool)
         self.iterations = np.zeros(count, dtype=np.int64)
         self.models = np.empty(count, dtype=object)
-        self._scenes = [None] * count
+        self.scenes = [None] * count
 
-    def _finish(self):
-        for name in ('value', 'force', 'lever', 'success', 'iterations', 'models'):
-            setattr(self, name, getattr(self, name).reshape(self.shape))
-        return self
-
-    def result(self, design, pressure):
-        """Return the RigidityResult of one scene, as a single solve returns it."""
-        scene = self._scenes[int(np.ravel_multi_index((design, pressure), self.shape))]
+    def scene_result(self, design, pressure):
+        """Return the rigidity Result of one scene, as its single call returns it."""
+        scene = self.scenes[int(np.ravel_multi_index((design, pressure), self.shape))]
         return scene() if callable(scene) else scene
 
-    def __repr__(self):
-        return (f'RigidityGrid(shape={self.shape}, axis={self.axis!r}, '
-                f'success={int(self.success.sum())}/{self.success.size})')
+    def finish(self):
+        """Return the Result (`RIGIDITY_GRID_FIELDS`)."""
+        fields = {name: getattr(self, name).reshape(self.shape) for name in (
+            'value', 'force', 'lever', 'success', 'iterations', 'models')}
+        return Result.of(dict(fields, designs=self.designs, pressures=self.pressures,
+                              axis=self.axis, displacement=self.displacement, shape=self.shape,
+                              result=self.scene_result))
 
 
 def rigidity_grid(designs, pressures, axis='x', displacement=0.010, settings=ModelSettings()):
     """
     Flexural rigidity (eq. 22) of every design x pressure, compiled over both cores.
+
+    Each scene is ``finger_model(design, settings).rigidity(p, axis, displacement)``
+    solved cold (the same model and arithmetic, so the same answer).
 
     Parameters
     ----------
@@ -482,7 +405,8 @@ def rigidity_grid(designs, pressures, axis='x', displacement=0.010, settings=Mod
 
     Returns
     -------
-    RigidityGrid
+    Result
+        `RIGIDITY_GRID_FIELDS`.
 
     """
     designs = _designs(designs)
@@ -490,7 +414,7 @@ def rigidity_grid(designs, pressures, axis='x', displacement=0.010, settings=Mod
     _in_envelope(designs, pressures, np.zeros((1, 2)))
     delta = check_rigidity(axis, displacement)
     settings = _settings(settings)
-    out = RigidityGrid(designs, pressures, axis, delta)
+    out = _RigidityGrid(designs, pressures, axis, delta)
     groups = _Groups()
     scenes = []
     scene_p = [float(p) for p in pressures]
@@ -520,13 +444,14 @@ def rigidity_grid(designs, pressures, axis='x', displacement=0.010, settings=Mod
             solver, p, choice = scenes[scene]
             out.iterations[scene] = batch.unloaded.iterations[j] + batch.iterations[j]
             out.models[scene] = _label(solver, choice)
-            out._scenes[scene] = _rigidity_builder(solver, axis, delta, p, batch, j)
+            out.scenes[scene] = functools.partial(_rigidity_scene, solver, axis, delta, p,
+                                                  batch, j)
             if found[j]:
                 out.success[scene] = True
                 out.force[scene] = batch.force[j]
                 out.lever[scene] = lever[j]
                 out.value[scene] = flexural_rigidity(batch.force[j], lever[j], delta)
-    return out._finish()
+    return out.finish()
 
 
 def _label(solver, choice):
@@ -540,24 +465,28 @@ def _store_rigidity(out, scene, result, choice, solver):
         result.lever
     out.iterations[scene] = result.iterations
     out.models[scene] = _label(solver, choice)
-    out._scenes[scene] = result
+    out.scenes[scene] = result
 
 
-def _rigidity_builder(solver, axis, delta, pressure, batch, j):
-    """Return a function that builds scene j's RigidityResult as the single solve does."""
-    def build():
-        free = batch.unloaded
-        status = SolverStatus(int(free.status[j]))
-        unloaded = solver._result(free.states[j], status, int(free.iterations[j]),
-                                  float(free.gradient[j]), float(free.step[j]),
-                                  float(free.min_eig[j]), float(free.fraction[j]), pressure,
-                                  [], (0.0, 0.0))
-        if not unloaded.success:
-            return rigidity_result(solver, axis, delta, pressure, unloaded)
-        out = engine.BorderedOutcome(batch.states[j], float(batch.force[j]),
-                                     bool(np.isfinite(batch.force[j])),
-                                     int(batch.iterations[j]), float(batch.fraction[j]),
-                                     bool(batch.stable[j]), float(batch.gradient[j]),
-                                     batch.tips[j])
-        return rigidity_result(solver, axis, delta, pressure, unloaded, out)
-    return build
+def _rigidity_scene(solver, axis, delta, pressure, batch, j):
+    """Build scene j's rigidity Result as the single call does (outputs 'tip')."""
+    free = batch.unloaded
+    problem = solver.engine_problem
+    unloaded = engine.NewtonOutcome(
+        free.states[j], SolverStatus(int(free.status[j])), int(free.iterations[j]),
+        float(free.gradient[j]), float(free.step[j]), float(free.min_eig[j]),
+        float(free.fraction[j]),
+        engine.outputs(problem, free.states[j:j + 1], [pressure], [], engine.TIP)[0])
+    if unloaded.status is not SolverStatus.SUCCESS:
+        out = engine.BorderedOutcome(unloaded.x, np.nan, False, 0, 0.0, False, np.nan,
+                                     np.full(2, np.nan), unloaded)
+        return rigidity_result(solver, axis, delta, pressure, out, engine.TIP)
+    found = bool(np.isfinite(batch.force[j]))
+    force = batch.force[j] * AXES[axis] if found else np.zeros(2)
+    fields = engine.outputs(problem, batch.states[j:j + 1], [pressure],
+                            [(solver.n_segments, force[None])], engine.TIP)[0]
+    out = engine.BorderedOutcome(batch.states[j], float(batch.force[j]), found,
+                                 int(batch.iterations[j]), float(batch.fraction[j]),
+                                 bool(batch.stable[j]), float(batch.gradient[j]), batch.tips[j],
+                                 unloaded, fields)
+    return rigidity_result(solver, axis, delta, pressure, out, engine.TIP)

@@ -34,9 +34,7 @@ def _design(prestrain=0.25):
 
 
 def _outputs(result):
-    """Read every derived output of a result (the shape kernels compile on first use)."""
-    for name in ('points', 'tip', 'curvature', 'fit_rmsd', 'valid', 'beta', 'message'):
-        getattr(result, name, None)
+    """Call a result's `position_at` (its kinematics run from Python)."""
     position_at = getattr(result, 'position_at', None)
     if position_at is not None:
         position_at(0.045)
@@ -74,6 +72,8 @@ def _engine_calls(solver, force):
         hooks['step'](data, grad, hess)
         hooks['solve_linear'](data, hess, grad)
         hooks['node_jacobian'](data, x, loads[0][0])
+        for samples in (False, True):
+            hooks['outputs'](data, x, 5.0e4, nodes, forces, samples)
 
 
 def _circle_fit():
@@ -92,10 +92,10 @@ def _scenes(solver):
     """Solve cold, warm and loaded, with every output, both rigidities and the engine calls."""
     free = solver.solve(pressure=1.0e5)
     _outputs(free)
-    _outputs(solver.solve(pressure=1.01e5, initial=free))
+    _outputs(solver.solve(pressure=1.01e5, initial=free, outputs='tip'))
     _outputs(solver.solve(pressure=1.0e5, tip_force=(0.05, -0.05)))
     solver.rigidity(pressure=5.0e4, axis='x')
-    solver.rigidity(pressure=5.0e4, axis='z')
+    solver.rigidity(pressure=5.0e4, axis='z', initial=free, outputs='all')
     _engine_calls(solver, (0.05, -0.05))
 
 
@@ -162,11 +162,11 @@ def _grids():
     pressures = [0.0, 1.0e5, 2.0e5]
     for settings in (ModelSettings(), ModelSettings(tolerance=0.0)):
         for forces in (((0.0, 0.0),), ((0.0, 0.0), (0.05, -0.05))):
-            grid = batch.solve_grid(designs, pressures, tip_forces=forces, settings=settings)
-            grid.curvature
-            grid.fit_rmsd
+            grid = batch.solve_grid(designs, pressures, tip_forces=forces, settings=settings,
+                                    outputs='all')
+            grid.result(0, 1, len(forces) - 1)
         for axis in ('x', 'z'):
-            batch.rigidity_grid(designs, pressures, axis=axis, settings=settings)
+            batch.rigidity_grid(designs, pressures, axis=axis, settings=settings).result(0, 1)
 
 
 class Part(typing.NamedTuple):

@@ -11,10 +11,12 @@ from .engine import SolverStatus
 from .kernels import contact as ck
 from .obstacles import (check_obstacles, Circle, ConvexPolygon, Ellipse, HalfPlane,
                         obstacle_params, translated)
+from .result import Result
 from .validation import real_number, real_pair
 
 __all__ = ['Circle', 'HalfPlane', 'ConvexPolygon', 'Ellipse', 'ContactSettings',
-           'ContactResult', 'ContactArc', 'FingerPoints', 'finger_points', 'solve_contact',
+           'contact_result', 'CONTACT_FIELDS', 'ContactArc', 'FingerPoints', 'finger_points',
+           'solve_contact',
            'contact_path', 'translated', 'point_gaps', 'FACES']
 
 #: Faces of the finger: the PEMC face at z = -H/2 (inner: the gripper closes towards it)
@@ -218,191 +220,168 @@ class ContactArc:
         return self.end - self.start
 
 
-class ContactResult:
-    """
-    Equilibrium of a finger touching rigid obstacles.
+#: The fields of a contact solve's `Result`, besides success, status, message and iterations.
+CONTACT_FIELDS = {
+    'pressure': '[Pa]', 'mu': 'Coulomb coefficient [-]',
+    'points': 'the finger points that may touch (`FingerPoints`)',
+    'obstacles': 'at the pose of this state',
+    'state': '(engine unknowns, multipliers, pair statuses): a warm start',
+    'anchors': "sticking pairs' anchors", 'fraction': 'of the step reached',
+    'stability': 'the smallest eigenvalue certifying stability (0: not certified)',
+    'finger': "the finger's Result at this state (outputs 'all'; its loads the tip force)",
+    'tip': 'position of the midplane tip, (X, Z) [m]',
+    's': "per (point, obstacle) pair: the point's reference arc length [m]",
+    'face': 'face index into FACES', 'obstacle': 'obstacle index',
+    'position': "the pair's finger point [m]",
+    'gap': 'signed distance of the point from the obstacle [m]',
+    'normal': 'outward normal nu of the obstacle at the nearest boundary point',
+    'tangent': 'tau = (-nu_z, nu_x)', 'force': 'contact force on the finger [N]',
+    'normal_force': 'force . nu (>= 0) [N]', 'tangential_force': 'force . tau [N]',
+    'line_load': 'normal force over the tributary length [N/m]',
+    'tangential_line_load': 'tangential force over the tributary length [N/m]',
+    'pair_status': '`kernels.contact` status (FREE, NORMAL, STICK, SLIP_POS, SLIP_NEG)',
+    'in_contact': 'carrying a normal force', 'touching': 'in contact, or within TOUCH_GAP',
+    'arcs': 'runs of touching points (ContactArc)',
+    'total_force': 'force of the finger on each obstacle, (B, 2) [N]',
+    'total_moment': "its moment about the obstacle's `reference`, about +Y, (B,) [N m]",
+    'normal_force_total': 'sum of every normal force [N]', 'faces': 'faces in contact',
+    'summary': 'one line: arcs in contact and the total normal force',
+    'contact_arc': 'function (face=None) -> (start, end) [m] of the touching points, or None',
+}
 
-    Attributes
+
+def contact_result(solver, outcome, points, obstacles, params, pressure, tip_force, mu=0.0,
+                   loads=()):
+    """
+    Build the Result of a contact solve (`CONTACT_FIELDS`): every field computed here.
+
+    Parameters
     ----------
-    success : bool
-        True only for a converged, stable state.
-    status : SolverStatus
-    message : str
-    iterations : int
+    solver : PCCSolver or RodSolver
+    outcome : engine.ContactOutcome
+    points : FingerPoints
+    obstacles : sequence
+        At the pose of this state.
+    params : ndarray
+        The obstacles' kernel parameters at that pose.
     pressure : float
         [Pa].
-    obstacles : tuple
-        At the pose of this state.
-    finger : LadderResult
-        The finger's state (its `points`, `tip`, `tangent`...).
-    tip : ndarray (2,)
-        [m].
-    s, face, obstacle : ndarray, shape (C,)
-        Per (point, obstacle) pair: reference arc length [m], face index into FACES,
-        obstacle index.
-    position : ndarray, shape (C, 2)
-        The pair's finger point [m].
-    gap : ndarray, shape (C,)
-        Signed distance of the point from the obstacle [m].
-    normal, tangent : ndarray, shape (C, 2)
-        Outward normal nu of the obstacle at the nearest boundary point, and
-        tau = (-nu_z, nu_x).
-    force : ndarray, shape (C, 2)
-        Contact force on the finger [N].
-    normal_force, tangential_force : ndarray, shape (C,)
-        force . nu (>= 0) and force . tau [N].
-    line_load, tangential_line_load : ndarray, shape (C,)
-        Normal and tangential force over the point's tributary length [N/m].
-    pair_status : ndarray of int, shape (C,)
-        `kernels.contact` status (FREE, NORMAL, STICK, SLIP_POS, SLIP_NEG).
-    in_contact : ndarray of bool, shape (C,)
-        Carrying a normal force.
-    touching : ndarray of bool, shape (C,)
-        In contact, or at a gap of at most TOUCH_GAP.
-    arcs : list of ContactArc
-        Runs of touching points.
-    total_force : ndarray, shape (B, 2)
-        Force of the finger on each obstacle [N].
-    total_moment : ndarray, shape (B,)
-        Its moment about the obstacle's `reference`, about +Y [N m].
-    normal_force_total : float
-        Sum of every normal force [N].
-    faces : tuple of str
-        Faces in contact.
+    tip_force : ndarray (2,)
+        [N].
+    mu : float
+        [-].
+    loads : sequence
+        The engine loads of the tip force.
 
     """
+    status = SolverStatus(outcome.status)
+    obstacles = tuple(obstacles)
+    count = len(obstacles)
+    pair_point = np.repeat(np.arange(points.s.size), count)
+    obstacle = np.tile(np.arange(count), points.s.size)
+    pair_status = np.asarray(outcome.pair_status)
+    positions = solver.point_positions(outcome.x, points.segment, points.offset, points.height)
+    position = positions[pair_point]
+    gap, normal, force, normal_force, tangential_force = ck.pair_forces(
+        np.array([o.kind for o in obstacles], dtype=np.int64),
+        np.ascontiguousarray(params, dtype=float), positions, pair_point, obstacle,
+        pair_status, np.ascontiguousarray(outcome.multipliers), float(mu))
+    scale = solver.gradient_scale / solver.length
+    in_contact = (pair_status != ck.FREE) & (normal_force > _FORCE_TOL * scale)
+    touching = in_contact | (np.abs(gap) <= TOUCH_GAP)
+    on_finger = np.zeros((count, 2))
+    np.add.at(on_finger, obstacle, force)
+    s = points.s[pair_point]
+    face = points.face[pair_point]
+    moment = np.zeros(count)
+    for b, item in enumerate(obstacles):
+        mine = obstacle == b
+        arm = position[mine] - item.reference
+        reaction = -force[mine]
+        moment[b] = float(np.sum(arm[:, 1] * reaction[:, 0] - arm[:, 0] * reaction[:, 1]))
+    arcs = _arcs(count, obstacle, face, touching, s, normal_force)
+    normal_force_total = float(normal_force[in_contact].sum())
+    summary = _summary(arcs, normal_force_total)
+    finger = _finger(solver, outcome, pressure, tip_force, loads)
+    why = ('could not be certified (the finger is not stable under its contact forces as '
+           'fixed loads)' if outcome.stability == 0.0 else 'fails')
+    message = _MESSAGES[status].format(summary=summary, fraction=outcome.fraction,
+                                       finger=finger.message, why=why)
+    weight = points.weight[pair_point]
+    return Result.of({
+        'success': status is SolverStatus.SUCCESS, 'status': status, 'message': message,
+        'iterations': outcome.iterations, 'pressure': float(pressure), 'mu': float(mu),
+        'points': points, 'obstacles': obstacles,
+        'state': (outcome.x, outcome.multipliers, outcome.pair_status),
+        'anchors': outcome.anchors, 'fraction': outcome.fraction,
+        'stability': outcome.stability, 'finger': finger, 'tip': finger.tip, 's': s,
+        'face': face, 'obstacle': obstacle, 'position': position, 'gap': gap,
+        'normal': normal, 'tangent': np.stack([-normal[:, 1], normal[:, 0]], axis=1),
+        'force': force, 'normal_force': normal_force, 'tangential_force': tangential_force,
+        'line_load': normal_force / weight, 'tangential_line_load': tangential_force / weight,
+        'pair_status': pair_status, 'in_contact': in_contact, 'touching': touching,
+        'arcs': arcs, 'total_force': -on_finger, 'total_moment': moment,
+        'normal_force_total': normal_force_total,
+        'faces': tuple(FACES[f] for f in sorted(set(face[in_contact]))), 'summary': summary,
+        'contact_arc': functools.partial(_contact_arc, touching, face, s),
+    })
 
-    def __init__(self, solver, outcome, points, obstacles, params, pressure, tip_force,
-                 mu=0.0, loads=()):
-        self.solver = solver
-        self.status = SolverStatus(outcome.status)
-        self.success = self.status is SolverStatus.SUCCESS
-        self.iterations = outcome.iterations
-        self.pressure = float(pressure)
-        self.mu = float(mu)
-        self.points = points
-        self.obstacles = tuple(obstacles)
-        self.state = (outcome.x, outcome.multipliers, outcome.pair_status)
-        self.anchors = outcome.anchors
-        self.fraction = outcome.fraction
-        self.stability = outcome.stability
-        self._finger = (outcome, list(loads), tip_force)
-        count = len(self.obstacles)
-        self._pair_point = np.repeat(np.arange(points.s.size), count)
-        self.obstacle = np.tile(np.arange(count), points.s.size)
-        self.pair_status = np.asarray(outcome.pair_status)
-        positions = solver.point_positions(outcome.x, points.segment, points.offset,
-                                           points.height)
-        self.position = positions[self._pair_point]
-        (self.gap, self.normal, self.force, self.normal_force,
-         self.tangential_force) = ck.pair_forces(
-            np.array([o.kind for o in self.obstacles], dtype=np.int64),
-            np.ascontiguousarray(params, dtype=float), positions, self._pair_point,
-            self.obstacle, self.pair_status, np.ascontiguousarray(outcome.multipliers),
-            self.mu)
-        scale = solver.gradient_scale / solver.length
-        self.in_contact = (self.pair_status != ck.FREE) & (self.normal_force > _FORCE_TOL
-                                                           * scale)
-        self.touching = self.in_contact | (np.abs(self.gap) <= TOUCH_GAP)
-        on_finger = np.zeros((count, 2))
-        np.add.at(on_finger, self.obstacle, self.force)
-        self.total_force = -on_finger
-        self.normal_force_total = float(self.normal_force[self.in_contact].sum())
 
-    # Built on first use: a path of many steps reads forces, rarely these.
-    s = property(lambda self: self.points.s[self._pair_point],
-                 doc="Reference arc length of every pair's point [m].")
-    face = property(lambda self: self.points.face[self._pair_point],
-                    doc="Face (index into FACES) of every pair's point.")
-    tangent = property(lambda self: np.stack([-self.normal[:, 1], self.normal[:, 0]], axis=1),
-                       doc='tau = (-nu_z, nu_x) of every pair.')
-    line_load = property(lambda self: self.normal_force / self.points.weight[self._pair_point],
-                         doc='Normal force over the tributary length [N/m].')
-    tangential_line_load = property(
-        lambda self: self.tangential_force / self.points.weight[self._pair_point],
-        doc='Tangential force over the tributary length [N/m].')
+def _finger(solver, outcome, pressure, tip_force, loads):
+    """Return the finger's Result at a contact state, its loads the tip force alone."""
+    force = np.asarray(tip_force, dtype=float)
+    fields = None
+    if isinstance(solver.engine_problem, engine.CompiledProblem):
+        fields = engine.outputs(solver.engine_problem, outcome.x[None], [pressure],
+                                [(node, np.asarray(f, dtype=float)[None]) for node, f in loads],
+                                engine.ALL)[0]
+    return solver._result(engine.NewtonOutcome(outcome.x, outcome.status, outcome.iterations,
+                                               0.0, 0.0, outcome.stability, outcome.fraction,
+                                               fields), pressure, force)
 
-    @functools.cached_property
-    def faces(self):
-        """Faces in contact."""
-        return tuple(FACES[f] for f in sorted(set(self.face[self.in_contact])))
 
-    @functools.cached_property
-    def total_moment(self):
-        """Moment of the finger's forces on each obstacle about its reference, +Y [N m]."""
-        out = np.zeros(len(self.obstacles))
-        for b, obstacle in enumerate(self.obstacles):
-            mine = self.obstacle == b
-            arm = self.position[mine] - obstacle.reference
-            reaction = -self.force[mine]
-            out[b] = float(np.sum(arm[:, 1] * reaction[:, 0] - arm[:, 0] * reaction[:, 1]))
-        return out
-
-    # Built on first use: a path of many steps reads forces, rarely these.
-    @functools.cached_property
-    def finger(self):
-        """The finger's result (`points`, `tangent`, `strains`...) at this state."""
-        outcome, loads, tip_force = self._finger
-        return self.solver._result(outcome.x, outcome.status, outcome.iterations, 0.0, 0.0,
-                                   outcome.stability, outcome.fraction, self.pressure, loads,
-                                   tip_force)
-
-    @functools.cached_property
-    def tip(self):
-        """Position of the midplane tip, (X, Z) [m]."""
-        return np.asarray(self.solver.node_jacobian(self.state[0], self.solver.tip_node)[0])
-
-    @functools.cached_property
-    def arcs(self):
-        """Runs of touching points (ContactArc), by obstacle and face."""
-        return self._arcs()
-
-    def _arcs(self):
-        arcs = []
-        for b in range(len(self.obstacles)):
-            for f, face in enumerate(FACES):
-                mine = np.nonzero((self.obstacle == b) & (self.face == f))[0]
+def _arcs(count, obstacle, face, touching, s, normal_force):
+    """Return the runs of touching points (ContactArc), by obstacle and face."""
+    arcs = []
+    for b in range(count):
+        for f, name in enumerate(FACES):
+            mine = np.nonzero((obstacle == b) & (face == f))[0]
+            run = []
+            for j in list(mine) + [None]:
+                if j is not None and touching[j]:
+                    run.append(j)
+                    continue
+                if run:
+                    arcs.append(ContactArc(name, b, float(s[run[0]]), float(s[run[-1]]),
+                                           len(run), float(normal_force[run].clip(0).sum())))
                 run = []
-                for j in list(mine) + [None]:
-                    if j is not None and self.touching[j]:
-                        run.append(j)
-                        continue
-                    if run:
-                        arcs.append(ContactArc(face, b, float(self.s[run[0]]),
-                                               float(self.s[run[-1]]), len(run),
-                                               float(self.normal_force[run].clip(0).sum())))
-                    run = []
-        return arcs
+    return arcs
 
-    @property
-    def message(self):
-        """What happened, with the contact in figures."""
-        why = ('could not be certified (the finger is not stable under its contact '
-               'forces as fixed loads)' if self.stability == 0.0 else 'fails')
-        return _MESSAGES[self.status].format(summary=self.summary(), fraction=self.fraction,
-                                             finger=self.finger.message, why=why)
 
-    def summary(self):
-        """One line: arcs in contact and the total normal force."""
-        if not self.arcs:
-            return 'no contact'
-        parts = [f'{a.face} face on obstacle {a.obstacle} '
-                 + (f'at s = {a.start * 1e3:.1f} mm' if a.points == 1 else
-                    f'along s = {a.start * 1e3:.1f}..{a.end * 1e3:.1f} mm')
-                 for a in self.arcs]
-        return f'{"; ".join(parts)}; total normal force {self.normal_force_total:.4g} N'
+def _summary(arcs, total):
+    """One line: arcs in contact and the total normal force."""
+    if not arcs:
+        return 'no contact'
+    parts = [f'{a.face} face on obstacle {a.obstacle} '
+             + (f'at s = {a.start * 1e3:.1f} mm' if a.points == 1 else
+                f'along s = {a.start * 1e3:.1f}..{a.end * 1e3:.1f} mm')
+             for a in arcs]
+    return f'{"; ".join(parts)}; total normal force {total:.4g} N'
 
-    def contact_arc(self, face=None):
-        """(start, end) [m] of the touching points (on `face`, if given); None if none."""
-        mask = self.touching if face is None else self.touching & (
-            self.face == FACES.index(face))
-        if not mask.any():
-            return None
-        return float(self.s[mask].min()), float(self.s[mask].max())
 
-    def __repr__(self):
-        return (f'ContactResult(success={self.success}, status={self.status.name}, '
-                f'normal_force_total={self.normal_force_total:.4g}, arcs={len(self.arcs)})')
+def _contact_arc(touching, face, s, face_name=None):
+    """(start, end) [m] of the touching points (on `face_name`, if given); None if none."""
+    mask = touching if face_name is None else touching & (face == FACES.index(face_name))
+    if not mask.any():
+        return None
+    return float(s[mask].min()), float(s[mask].max())
+
+
+def _same_finger(result, solver, points, count):
+    """Whether a contact result can start a solve of `solver` with these points, obstacles."""
+    return (isinstance(result, Result) and 'pair_status' in result
+            and result.finger.segment_edges is solver.edges
+            and result.pair_status.size == points.s.size * count)
 
 
 def point_gaps(solver, x, obstacles, settings=ContactSettings()):
@@ -457,12 +436,13 @@ def solve_contact(solver, pressure, obstacles, tip_force=(0.0, 0.0),
     tip_force : (float, float)
         Tip load besides the contact [N].
     settings : ContactSettings
-    initial : ContactResult, optional
+    initial : Result, optional
         Warm start from a result of the same solver, points and obstacle count.
 
     Returns
     -------
-    ContactResult
+    Result
+        `CONTACT_FIELDS`, with success, status, message and iterations.
 
     References
     ----------
@@ -474,17 +454,16 @@ def solve_contact(solver, pressure, obstacles, tip_force=(0.0, 0.0),
     points = finger_points(solver, settings)
     state = None
     if initial is not None:
-        if not (isinstance(initial, ContactResult) and initial.solver is solver
-                and initial.pair_status.size == points.s.size * len(obstacles)):
-            raise ValueError('`initial` must be None or a ContactResult of the same solver, '
+        if not _same_finger(initial, solver, points, len(obstacles)):
+            raise ValueError('`initial` must be None or a contact result of the same solver, '
                              'contact points and number of obstacles')
         state = initial.state
     con = _contact_set(solver, points, obstacles, 0.0, settings.penalty)
     loads = solver.tip_loads(force)
     outcome = engine.contact_solve(solver.engine_problem, pressure, loads, con, solver._options,
                                    state, top=solver.design.max_pressure)
-    return ContactResult(solver, outcome, points, obstacles, con.params, pressure, force,
-                         loads=loads)
+    return contact_result(solver, outcome, points, obstacles, con.params, pressure, force,
+                          loads=loads)
 
 
 def contact_path(solver, pressures, obstacles, shifts=None, mu=0.0, tip_force=(0.0, 0.0),
@@ -513,13 +492,13 @@ def contact_path(solver, pressures, obstacles, shifts=None, mu=0.0, tip_force=(0
     tip_force : (float, float)
         Tip load besides the contact [N], the same at every step.
     settings : ContactSettings
-    start : ContactResult, optional
+    start : Result, optional
         State before step 0, with the obstacles at their base pose (shift zero): e.g. a
         `solve_contact` result.
 
     Returns
     -------
-    list of ContactResult
+    list of Result
         One per step; shorter if a step could not be completed (the last entry then says
         why).
 
@@ -553,9 +532,8 @@ def contact_path(solver, pressures, obstacles, shifts=None, mu=0.0, tip_force=(0
             return results
         start, begin, base_shift = first, 1, shifts[0]
     else:
-        if not (isinstance(start, ContactResult) and start.solver is solver
-                and start.pair_status.size == points.s.size * count):
-            raise ValueError('`start` must be a ContactResult of the same solver, contact '
+        if not _same_finger(start, solver, points, count):
+            raise ValueError('`start` must be a contact result of the same solver, contact '
                              'points and number of obstacles')
         begin, base_shift = 0, np.zeros((count, 2))
     con = _contact_set(solver, points, obstacles, mu, settings.penalty)
@@ -571,6 +549,6 @@ def contact_path(solver, pressures, obstacles, shifts=None, mu=0.0, tip_force=(0
                                 (x, lam, status, base_shift, start.pressure))
     for k, (outcome, params) in enumerate(steps):
         placed = tuple(translated(o, s) for o, s in zip(obstacles, shifts[begin + k]))
-        results.append(ContactResult(solver, outcome, points, placed, params,
-                                     pressures[begin + k], force, mu, loads))
+        results.append(contact_result(solver, outcome, points, placed, params,
+                                      pressures[begin + k], force, mu, loads))
     return results

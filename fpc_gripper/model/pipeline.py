@@ -7,6 +7,7 @@ import math
 import numpy as np
 
 from .design import ActuatorDesign
+from .result import rung_label
 from .selection import AdaptiveSolver, make_solver, RUNGS
 from .validation import check_pressure_model
 
@@ -164,22 +165,9 @@ def contact_model(design, settings=ModelSettings()):
 
 def model_label(result):
     """Rung and N of the model behind a result, e.g. 'ccm_aligned N=22' or 'ccm N=8'."""
-    if result is None:
-        return 'none'
-    choice = getattr(result, 'model_choice', None)
-    if choice is not None:
-        return rung_label(choice.rung, choice.n_segments)
-    solver = getattr(result, 'solver', None)
-    if getattr(solver, 'rung', None) is None:
-        return type(result).__name__
-    return solver_label(solver)
+    return 'none' if result is None else result.model
 
 
 def solver_label(solver):
     """Return the label of the rung and N of a solver, e.g. 'pcc N=22', 'ccm N=8' or 'rod'."""
-    return rung_label(solver.rung, 0 if solver.rung in ('arc', 'rod') else solver.n_segments)
-
-
-def rung_label(rung, n_segments):
-    """Label of a rung and N, e.g. 'pcc N=22', or the rung alone where N is 0 (arc, rod)."""
-    return f'{rung} N={n_segments}' if n_segments else rung
+    return rung_label(solver.rung, solver.n_segments)

@@ -123,10 +123,9 @@ def make_solver(rung, n_segments, design, pressure_model=None):
         return CCMSolver(design, n_segments=int(n_segments), pressure_model=pressure_model,
                          reconstruction='consistent')
     if rung == 'ccm_aligned':
-        solver = CCMSolver(design, segment_edges=aligned_edges(design, n_segments),
-                           pressure_model=pressure_model, reconstruction='consistent')
-        solver.rung = 'ccm_aligned'
-        return solver
+        return CCMSolver(design, segment_edges=aligned_edges(design, n_segments),
+                         pressure_model=pressure_model, reconstruction='consistent',
+                         rung='ccm_aligned')
     if rung == 'pcc':
         return PCCSolver(design, n_segments=int(n_segments), pressure_model=pressure_model)
     if rung == 'rod':
@@ -225,12 +224,12 @@ class _ArcFeature:
         n = self.grid.size
         out = engine.solve_batch([self.arc.engine_problem], np.zeros(n, dtype=np.int64),
                                  self.grid, [self.arc.tip_node], np.zeros((n, 1, 2)),
-                                 self.arc._options, self.arc.tip_node)
+                                 self.arc._options)
         if np.all(out.status == int(SolverStatus.SUCCESS)):
             return list(out.states)
         state, states = None, []
         for pressure in self.grid:
-            state = self.arc.solve(pressure, (0.0, 0.0), initial=state)
+            state = self.arc.solve(pressure, (0.0, 0.0), initial=state, outputs='tip')
             state = state if state.success else None
             states.append(None if state is None else self.arc._pack(state.state))
         return states
@@ -255,7 +254,7 @@ class _ArcFeature:
         key = (pressure,) + tuple(tip_force)
         if key not in self._loaded:
             out = engine.solve(self.arc.engine_problem, pressure, self.arc.tip_loads(tip_force),
-                               self.arc._options, self._nearest(pressure))
+                               self.arc._options, self._nearest(pressure), engine.TIP)
             if len(self._loaded) >= _FEATURE_CACHE:
                 self._loaded.clear()
             self._loaded[key] = self._turning(out.x, out.status)
@@ -302,7 +301,7 @@ class _ArcFeature:
                 [self.arc.engine_problem], np.zeros(len(index), dtype=np.int64),
                 [pressures[k] for k in index], [self.arc.tip_node],
                 np.array([tip_forces[k] for k in index], dtype=float).reshape(-1, 1, 2),
-                self.arc._options, self.arc.tip_node, initial=np.array(starts))
+                self.arc._options, initial=np.array(starts))
             for j, k in enumerate(index):
                 out[k] = self._turning(batch.states[j], SolverStatus(int(batch.status[j])))
         return out
@@ -544,51 +543,42 @@ class AdaptiveSolver:
             self._solvers[key] = make_solver(rung, n_segments, self.design, self.pressure_model)
         return self._solvers[key]
 
-    def _warm(self, solver, initial):
-        return initial if getattr(initial, 'solver', None) is solver else None
+    @staticmethod
+    def _warm(solver, initial):
+        """Return `initial` where it is that solver's own result (a warm start), else None."""
+        return initial if initial is not None and initial.segment_edges is solver.edges \
+            else None
 
-    def solve(self, pressure=0.0, tip_force=(0.0, 0.0), initial=None):
+    def solve(self, pressure=0.0, tip_force=(0.0, 0.0), initial=None, *, outputs='all'):
         """
         Solve with the model the scene needs; see `CCMSolver.solve`.
 
         `initial` warm-starts only a result of the same underlying solver; a model
-        change starts from the flat state. The result carries `model_choice`, with
-        the N actually used after refinement.
+        change starts from the flat state. The result's `model_choice` is the choice,
+        with the N actually used after refinement.
         """
         choice = self.choose(pressure, tip_force)
         rung, n = choice.rung, choice.n_segments
         while True:
             solver = self.solver_for(rung, n)
-            result = solver.solve(pressure, tip_force, initial=self._warm(solver, initial))
+            label = choice if n == choice.n_segments else ModelChoice(
+                rung, n, choice.predicted_error, f'{choice.reason}; refined to N = {n}',
+                choice.cost)
+            result = solver.solve(pressure, tip_force, initial=self._warm(solver, initial),
+                                  outputs=outputs, model_choice=label)
             if not self.refines(rung, n, result):
-                break
+                return result
             n *= 2
-        return self._labelled(result, choice, n)
 
     def refines(self, rung, n_segments, result):
         """Whether `solve` goes on from `result` of (rung, N) to twice the N."""
         return (rung.startswith('ccm') and 2 * n_segments <= self.max_segments
                 and not (result.success and result.valid))
 
-    @staticmethod
-    def _labelled(result, choice, n):
-        """
-        Return a copy of `result` with its `model_choice`: the chosen rung at the N used.
-
-        A copy, so that the rung's own result (which a warm start may hold) never changes
-        after its solve returned it.
-        """
-        # What copy.copy does for these plain classes, in a quarter of its time.
-        labelled = object.__new__(type(result))
-        labelled.__dict__.update(result.__dict__)
-        labelled.model_choice = choice if n == choice.n_segments else ModelChoice(
-            choice.rung, n, choice.predicted_error, f'{choice.reason}; refined to N = {n}',
-            choice.cost)
-        return labelled
-
-    def rigidity(self, pressure=0.0, axis='x', displacement=0.010, initial=None):
+    def rigidity(self, pressure=0.0, axis='x', displacement=0.010, initial=None, *,
+                 outputs='tip'):
         """Flexural rigidity with the model the unloaded scene needs; see `CCMSolver`."""
         choice = self.choose(pressure, (0.0, 0.0))
         solver = self.solver_for(choice.rung, choice.n_segments)
         return solver.rigidity(pressure, axis, displacement,
-                               initial=self._warm(solver, initial))
+                               initial=self._warm(solver, initial), outputs=outputs)

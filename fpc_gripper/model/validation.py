@@ -10,7 +10,7 @@ from ..safe_yaml import brief
 __all__ = ['ArgumentError', 'arc_lengths', 'DESIGN_BOUNDS', 'DesignBounds', 'ENVELOPE',
            'InputLimits', 'UNIQUE_LOAD', 'check_force', 'check_interval', 'check_load',
            'real_number', 'real_pair', 'warm_start_allowed', 'check_pressure_model',
-           'PRESSURE_MODELS', 'PRESSURE_MODEL_NAMES']
+           'PRESSURE_MODELS', 'PRESSURE_MODEL_NAMES', 'OUTPUT_LEVELS', 'check_outputs']
 
 #: Pressure-work coefficient k_p of Pi_P = -k_p P V by name (SPEC "Pressure work"):
 #: 1/(gamma - 1) with gamma = 1.4, exactly 2.5 (1/(1.4 - 1) rounds to 2.5000000000000004).
@@ -263,6 +263,20 @@ def check_force(name, force, limits=ENVELOPE):
     if not magnitude <= limits.max_tip_force:
         raise ArgumentError(name, f'magnitude must be <= {limits.max_tip_force:g} [N] (the '
                                   f'envelope of the model), got {magnitude:.6g} N')
+
+
+#: What a solve computes besides the state, cheapest first (`engine.OUTPUTS`'s levels): the
+#: chain ('tip': tip, nodes, rotations, coefficients, validity), then the energy and the
+#: midplane samples ('shape'), then their circle fit ('all').
+OUTPUT_LEVELS = {'tip': 0, 'shape': 1, 'all': 2}
+
+
+def check_outputs(outputs):
+    """Return the level of an `outputs` name ('tip', 'shape' or 'all'); raise naming it."""
+    level = OUTPUT_LEVELS.get(outputs) if isinstance(outputs, str) else None
+    if level is None:
+        raise ValueError(f'`outputs` must be one of {list(OUTPUT_LEVELS)}, got {outputs!r}')
+    return level
 
 
 def warm_start_allowed(total_load):

@@ -172,7 +172,7 @@ class FingerState:
         A pressure was accepted; until then the finger is waiting and solves nothing.
     pending : bool
         Accepted input not yet solved.
-    result : CCMResult or None
+    result : Result or None
         Last good state (successful solve), the one published.
     result_key : tuple or None
         `key` of the input `result` answers (its solver first).
@@ -239,7 +239,7 @@ class Update:
     ----------
     index : int
         Finger index.
-    result : CCMResult or None
+    result : Result or None
         New good state to publish; None when the solve failed (publish nothing).
     stamp_ns : int
         Stamp of the new state [ns].
@@ -725,7 +725,7 @@ class ModelCore:
 
         Returns
         -------
-        RigidityResult or None
+        Result or None
             None before any good state, or when the computation raised.
 
         """

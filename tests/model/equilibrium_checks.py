@@ -56,16 +56,17 @@ def _reference(kind, design, n_segments):
     return ReferenceRodSolver(design)
 
 
-def independent_residual(result):
+def independent_residual(model, result):
     """
-    Return the relative gradient of a result, computed without the solver's own kernels.
+    Return the relative gradient of `model`'s result, computed without the solver's own kernels.
 
     CCM: finite differences of the potential rebuilt from the section law and SPEC's
     kinematics (test_stability.IndependentCCM). PCC and rod: the numpy references of
     their potentials (the code before compilation). Arc: central differences of its
     potential. Relative to the solver's gradient scale.
     """
-    solver = result.solver
+    choice = result.model_choice
+    solver = model if choice is None else model.solver_for(choice.rung, choice.n_segments)
     if isinstance(solver, CCMSolver):
         return independent_gradient(solver, result)
     loads = solver.tip_loads(np.asarray(result.tip_force))

@@ -42,7 +42,7 @@ def grid(request, designs):
     """(settings, forces, grid, single cold solves keyed by (d, p, f))."""
     settings, extra = SETTINGS[request.param]
     forces = FORCES + (extra,)
-    out = solve_grid(designs, PRESSURES, forces, settings)
+    out = solve_grid(designs, PRESSURES, forces, settings, outputs='all')
     singles = {}
     for (d, design), (p, pressure), (f, force) in itertools.product(
             enumerate(designs), enumerate(PRESSURES), enumerate(forces)):
@@ -52,7 +52,7 @@ def grid(request, designs):
 
 def _state(result):
     """The unknowns of a result as one flat array (the rod's state is a pair of arrays)."""
-    state = result.q if hasattr(result, 'q') else result.state
+    state = result.state
     if isinstance(state, tuple):
         return np.concatenate([np.ravel(part) for part in state])
     return state
@@ -66,8 +66,14 @@ def _assert_same_result(got, want):
     assert model_label(got) == model_label(want)
     assert deviation(_state(got), _state(want)) <= RTOL
     assert deviation(got.tip, want.tip) <= RTOL
-    assert deviation(got.points, want.points) <= RTOL
-    assert abs(got.energy - want.energy) <= RTOL * abs(want.energy)
+    for field in ('nodes', 'beta', 'points', 'tangent', 'coefficients', 'energy'):
+        assert (getattr(got, field) is None) == (getattr(want, field) is None), field
+    if want.points is not None:
+        assert deviation(got.nodes, want.nodes) <= RTOL
+        assert deviation(got.points, want.points) <= RTOL
+        assert abs(got.energy - want.energy) <= RTOL * abs(want.energy)
+    if want.curvature is not None:
+        assert abs(got.curvature - want.curvature) <= RTOL * abs(want.curvature)
     assert got.pressure == want.pressure and got.tip_force == want.tip_force
 
 
@@ -82,6 +88,9 @@ def test_grid_equals_single_solves(grid, designs):
         assert out.iterations[key] == single.iterations, key
         assert out.models[key] == model_label(single), key
         assert deviation(out.tip[key], single.tip) <= RTOL, key
+        assert out.valid[key] == single.valid, key
+        assert abs(out.curvature[key] - single.curvature) <= RTOL * abs(single.curvature), key
+        assert abs(out.fit_rmsd[key] - single.fit_rmsd) <= 1e-9 * single.fit_rmsd + 1e-18, key
         _assert_same_result(out.result(*key), single)
 
 
@@ -114,7 +123,10 @@ def test_grid_of_one_design_and_one_force():
     assert out.shape == (1, 1, 1)
     single = CCMSolver(design, 8).solve(150e3, (0.2, -0.1))
     _assert_same_result(out.result(0, 0, 0), single)
-    assert 'GridResult(shape=(1, 1, 1), success=1/1)' == repr(out)
+    assert out.curvature is None and out.energy is None      # outputs 'tip', the default
+    assert repr(out).startswith('Result(') and 'shape=(1, 1, 1)' in repr(out)
+    with pytest.raises(AttributeError, match='read-only'):
+        out.success = None
 
 
 # -- flexural rigidity ------------------------------------------------------------------
@@ -229,7 +241,7 @@ def _check_batch_scenes(problems, design, pressures, forces, tip):
     batch_forces = (np.asarray(forces, dtype=float).reshape(len(design), 1, 2)
                     if forces is not None else np.zeros((len(design), 0, 2)))
     out = engine.solve_batch(_engine(problems), design, pressures, nodes, batch_forces,
-                             problems[0]._options, tip)
+                             problems[0]._options, level=engine.ALL)
     statuses = []
     for i, (d, pressure) in enumerate(zip(design, pressures)):
         problem = problems[d]
@@ -245,6 +257,9 @@ def _check_batch_scenes(problems, design, pressures, forces, tip):
             got, want = getattr(out, field)[i], getattr(single, field)
             assert (np.isnan(got) and np.isnan(want)) or abs(got - want) <= RTOL * max(
                 abs(want), 1e-300), (field, i)
+        for field in ('energy', 'curvature', 'fit_rmsd'):
+            got, want = getattr(out, field)[i], getattr(single.fields, field)
+            assert abs(got - want) <= RTOL * abs(want) + 1e-18, (field, i)
         statuses.append(single.status)
     return statuses
 
@@ -289,8 +304,9 @@ def test_rigidity_batch_equals_single_rigidity(axis):
     for i, (d, pressure) in enumerate(zip(design, pressures)):
         problem = problems[d]
         free = engine.solve(problem.engine_problem, pressure, [], problem._options)
-        single = engine.rigidity(problem.engine_problem, free.x, pressure, 8, direction, 0.010,
+        single = engine.rigidity(problem.engine_problem, pressure, 8, direction, 0.010,
                                  problem._options)
+        assert single.unloaded.iterations == free.iterations
         assert out.unloaded.status[i] == int(free.status)
         assert out.unloaded.iterations[i] == free.iterations
         assert deviation(out.unloaded.states[i], free.x) <= RTOL
@@ -313,7 +329,7 @@ def test_engine_batches_reject_bad_indices(design, pressures, match):
     forces = np.zeros((len(np.ravel(pressures)), 1, 2))
     with pytest.raises(ValueError, match=match):
         engine.solve_batch(_engine(problems), design, pressures, [8], forces,
-                           problems[0]._options, 8)
+                           problems[0]._options)
     with pytest.raises(ValueError, match=match):
         engine.rigidity_batch(_engine(problems), design, pressures, 8, [1.0, 0.0], 0.01,
                               problems[0]._options)
@@ -343,7 +359,7 @@ def test_engine_batches_reject_mixed_problems(make, exc, match):
     pressures = [0.0] * len(design)
     with pytest.raises(exc, match=match):
         engine.solve_batch(_engine(problems), design, pressures, [],
-                           np.zeros((len(design), 0, 2)), options, 8)
+                           np.zeros((len(design), 0, 2)), options)
     with pytest.raises(exc, match=match):
         engine.rigidity_batch(_engine(problems), design, pressures, 8, [1.0, 0.0], 0.01,
                               options)
@@ -356,5 +372,5 @@ def test_engine_batches_reject_mixed_problems(make, exc, match):
 def test_model_label_names_the_rung_of_an_unlabelled_result(rung, n, label):
     result = finger_model(ActuatorDesign.paper(0.25),
                           ModelSettings(rung=rung, n_segments=n)).solve(50e3)
-    assert not hasattr(result, 'model_choice')
+    assert result.model_choice is None
     assert model_label(result) == label

@@ -144,11 +144,13 @@ def test_compiled_and_interpreted_rigidity_agree(make, axis):
     free = engine.solve(solver.engine_problem, 30e3, [], solver._options)
     assert free.status is SolverStatus.SUCCESS
     python = Interpreted(solver)
-    compiled = engine.rigidity(solver.engine_problem, free.x, 30e3, _tip(solver), direction, 0.010,
-                               solver._options)
-    interpreted = engine.rigidity(python, free.x, 30e3, _tip(solver), direction, 0.010,
-                                  solver._options)
+    compiled = engine.rigidity(solver.engine_problem, 30e3, _tip(solver), direction, 0.010,
+                               solver._options, initial=free.x)
+    interpreted = engine.rigidity(python, 30e3, _tip(solver), direction, 0.010,
+                                  solver._options, initial=free.x)
     assert python.calls > 0
+    assert interpreted.unloaded.iterations == compiled.unloaded.iterations
+    assert deviation(interpreted.unloaded.x, compiled.unloaded.x) <= RTOL
     assert compiled.success and interpreted.success
     assert interpreted.iterations == compiled.iterations
     assert interpreted.stable == compiled.stable
@@ -158,7 +160,7 @@ def test_compiled_and_interpreted_rigidity_agree(make, axis):
     j = 0 if axis == 'x' else 1
     for out in (compiled, interpreted):
         moved = solver.node_jacobian(out.x, _tip(solver))[0][j] - \
-            solver.node_jacobian(free.x, _tip(solver))[0][j]
+            solver.node_jacobian(out.unloaded.x, _tip(solver))[0][j]
         assert abs(moved - 0.010) <= 1e-9 * 0.010
 
 
@@ -182,8 +184,8 @@ def test_a_compiled_problem_never_calls_back_into_its_solver():
     after = engine.sensitivity(problem, reference.x, 80e3, loads, rates)[0]
     assert deviation(after, before) <= RTOL
     free = engine.solve(problem, 80e3, [], solver._options)
-    assert engine.rigidity(problem, free.x, 80e3, 8, np.array([1.0, 0.0]), 0.01,
-                           solver._options).success
+    assert engine.rigidity(problem, 80e3, 8, np.array([1.0, 0.0]), 0.01, solver._options,
+                           initial=free.x).success
     with pytest.raises(AssertionError, match='Python hook'):
         engine.solve(Interpreted(solver), 80e3, [], solver._options)
     assert not numba.config.DISABLE_JIT
@@ -208,7 +210,7 @@ def test_every_hook_is_a_compiled_kernel(kind, loaded):
     data = solver.engine_problem.data[loaded]
     assert type(data).__name__ == kind
     hooks = engine.hooks_of(type(data))
-    base = ['derivatives', 'energy', 'node_jacobian', 'solve_linear', 'step']
+    base = ['derivatives', 'energy', 'node_jacobian', 'outputs', 'solve_linear', 'step']
     # The PCC has face points too (contact): docs/physics.md, section 15.2.
     points = ['point_derivatives', 'point_jacobian', 'point_positions']
     assert sorted(hooks) == sorted(base + (points if kind == 'PCCData' else []))
@@ -239,6 +241,16 @@ def test_every_hook_is_a_compiled_kernel(kind, loaded):
     position, jacobian = hooks['node_jacobian'](data, x, _tip(solver))
     assert deviation(position, solver.node_jacobian(x, _tip(solver))[0]) <= RTOL
     assert jacobian.shape == (2,) + x.shape
+    # The outputs: the chain ends at the node Jacobian's tip, the samples at the tip, and
+    # the energy is the energy hook's; without samples, no sample rows.
+    chain_nodes, beta, theta, _, valid, out_energy, points, tangent, _ = hooks['outputs'](
+        data, x, pressure, nodes, forces, True)
+    np.testing.assert_allclose(theta, np.concatenate([[0.0], np.cumsum(beta)[:-1]]), atol=1e-14)
+    assert deviation(chain_nodes[-1], position) <= RTOL and np.all(chain_nodes[0] == 0.0)
+    assert deviation(points[-1], position) <= RTOL and points.shape[0] == tangent.size > 2
+    assert out_energy == pytest.approx(energy, rel=1e-12) and valid
+    assert beta.size == chain_nodes.shape[0] - 1
+    assert hooks['outputs'](data, x, pressure, nodes, forces, False)[6].shape == (0, 2)
     if kind == 'PCCData':
         # Face points: the compiled hooks against the solver's methods (the same kernels).
         seg, off = np.array([3, 21]), np.array([0.5, 1.0]) * solver.lengths[[3, 21]]

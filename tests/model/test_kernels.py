@@ -52,8 +52,8 @@ def states(request):
                 extra = extra if point is not None else ()
                 result = solver.solve(pressure, tip, point_loads=extra)
                 assert result.success, result.message
-                loads = list(result.point_loads)
-                q = result.q
+                loads = solver._loads(tip, extra)
+                q = result.state
                 out.append((solver, q, pressure, loads))
                 jitter = rng.normal(size=q.shape) * (0.1 * np.abs(q) + 0.01)
                 out.append((solver, q + jitter, pressure, loads))
@@ -68,7 +68,7 @@ def _params(solver, pressure):
 def test_kernels_run_compiled():
     # Under NUMBA_DISABLE_JIT the kernels would be plain Python and prove nothing.
     solver = _solver(0.25, 3, False, 0.05)
-    q = solver.solve(1e5).q
+    q = solver.solve(1e5).state
     kernels.segment_derivatives(q, solver.segments, *_params(solver, 1e5))
     chain.load_derivatives(q, solver.segments.lengths, [(3, np.array([0.1, 0.2]))])
     linear.newton_step(np.ones((3, 4)), np.tile(np.eye(4), (3, 1, 1)))

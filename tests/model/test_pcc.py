@@ -7,7 +7,7 @@ import numpy as np
 from pcc_reference import random_state
 import pytest
 
-from fpc_gripper.model import (ActuatorDesign, ArcSolver, PCCResult, PCCSolver, RodSolver,
+from fpc_gripper.model import (ActuatorDesign, ArcSolver, PCCSolver, Result, RodSolver,
                                SolverStatus)
 from fpc_gripper.model.discretisations.pcc import half_angle_sinc, pcc_edges
 from fpc_gripper.model.section.law import section_minimiser, station_layout
@@ -263,7 +263,8 @@ def test_result_fields_and_errors():
     design = ActuatorDesign.paper(0.25)
     solver = PCCSolver(design, n_segments=40)
     result = solver.solve(1e5, (0.2, -0.1))
-    assert isinstance(result, PCCResult) and result.status is SolverStatus.SUCCESS
+    assert isinstance(result, Result) and result.status is SolverStatus.SUCCESS
+    assert result.model == f'pcc N={solver.n_segments}' and result.rung == 'pcc'
     n = solver.n_segments
     assert result.state.shape == (n, 3) and result.beta.shape == (n,)
     assert result.coefficients.shape == (n, 4) and result.nodes.shape == (n + 1, 2)

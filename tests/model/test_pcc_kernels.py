@@ -5,9 +5,10 @@ import numpy as np
 from pcc_reference import half_angle_sinc as reference_sinc, random_state, ReferencePCCSolver
 import pytest
 
-from fpc_gripper.model import ActuatorDesign
+from fpc_gripper.model import ActuatorDesign, engine
 from fpc_gripper.model.discretisations.pcc import half_angle_sinc, PCCSolver
 from fpc_gripper.model.kernels import linear, pcc as pcc_kernels, pcc_section, shapes
+from fpc_gripper.model.kernels.shapes import OUTPUT_FIELDS
 
 #: Kernels against the reference: the same formulas, in the same order but for dot
 #: products and einsum, leave round-off only (seen <= 1.9e-15), relative to the largest
@@ -72,12 +73,13 @@ def test_kernels_run_compiled():
     linear.banded_step(hess.lower, grad)
     solver.node_jacobian(x, 24)
     solver.nodes(x)
+    shapes.pcc_outputs(data, x, 1e5, *solver._load_arrays([]), True)
     half_angle_sinc(np.array([0.5]))
     for module, name in ((pcc_section, 'half_angle_sinc_kernel'), (pcc_kernels, 'energy_kernel'),
                          (pcc_kernels, 'derivatives_kernel'), (linear, 'banded_cholesky'),
                          (linear, 'cholesky_solve'), (linear, 'banded_step'),
                          (pcc_kernels, 'nodes_kernel'), (pcc_kernels, 'node_jacobian_kernel'),
-                         (shapes, 'outputs_kernel'), (pcc_kernels, 'pcc_derivatives'),
+                         (shapes, 'pcc_outputs'), (pcc_kernels, 'pcc_derivatives'),
                          (pcc_kernels, 'pcc_energy'), (pcc_kernels, 'pcc_solve_linear')):
         kernel = getattr(module, name)
         assert kernel.signatures and kernel.targetoptions['nopython'], name
@@ -201,15 +203,20 @@ def test_kinematics_equal_numpy(states):
 
 
 def test_outputs_equal_numpy(states):
+    # The compiled `outputs` hook against the numpy reference's, field by field.
     for solver, reference, x, pressure, loads, _ in states[::3]:
         state = solver._unpack(x)
         force = loads[0][1] if len(loads) == 1 else np.zeros(2)
-        got = solver._outputs(state, pressure, force)
+        data = solver.engine_problem.data[True]
+        hook = engine.hooks_of(type(data))['outputs']
+        out = dict(zip(OUTPUT_FIELDS, hook(data, np.ascontiguousarray(x), pressure,
+                                           np.array([solver.n_segments]), force[None], True)))
         want = reference._outputs(state, pressure, force)
-        assert got.keys() == want.keys()
-        for key in want:
+        assert out['valid'] is True
+        assert deviation(out['nodes'][-1], want['tip']) <= RTOL
+        for key in ('points', 'tangent', 'strains', 'beta', 'coefficients', 'nodes', 'energy'):
             scale = abs(want[key]) if key == 'energy' else None
-            assert deviation(got[key], want[key], scale) <= RTOL, key
+            assert deviation(out[key], want[key], scale) <= RTOL, key
 
 
 @pytest.mark.parametrize('prestrain, pressure, force, n', [

@@ -15,9 +15,8 @@ RUNGS = [(CCMSolver, {'n_segments': 8}), (CCMSolver, {'n_segments': 4,
 
 
 def state(result):
-    return result.q if hasattr(result, 'q') else np.concatenate(
-        [np.ravel(part) for part in (result.state if isinstance(result.state, tuple)
-                                     else (result.state,))])
+    return np.concatenate([np.ravel(part) for part in (
+        result.state if isinstance(result.state, tuple) else (result.state,))])
 
 
 def test_default_factor_is_the_adiabatic_2_5():

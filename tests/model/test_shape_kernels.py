@@ -7,7 +7,7 @@ import pytest
 from scipy.optimize._numdiff import approx_derivative
 
 from fpc_gripper.model import ActuatorDesign, batch, CCMSolver, fit_circle
-from fpc_gripper.model.kernels import shapes as shape_kernels
+from fpc_gripper.model.kernels import circle as circle_kernels
 from fpc_gripper.model.pipeline import ModelSettings
 
 #: Both fits stop at the orthogonal-distance minimum; MINPACK stops a little earlier
@@ -31,7 +31,7 @@ def _finger_points():
     forces = [(0.0, 0.0), (0.3, -0.2)]
     out = []
     for settings in (ModelSettings(tolerance=0.0), ModelSettings()):
-        grid = batch.solve_grid(designs, pressures, forces, settings)
+        grid = batch.solve_grid(designs, pressures, forces, settings, outputs='all')
         for index in np.ndindex(grid.shape):
             out.append((grid, index, grid.result(*index).points))
     return out
@@ -58,21 +58,24 @@ def test_compiled_fit_is_the_least_squares_minimum():
     # at the compiled fit's parameters, to round-off of J and r.
     for _, _, points in FINGERS[::5]:
         x, z, r2 = _scaled(points)
-        start = shape_kernels._pratt(x, z, r2)
-        params = shape_kernels._levenberg_marquardt(
+        start = circle_kernels._pratt(x, z, r2)
+        params, cost = circle_kernels._levenberg_marquardt(
             np.array([start[0], start[3], np.arctan2(start[2], start[1])]), x, z, r2)
         dist = circle_reference._signed_distances(params, x, z, r2)
         jac = approx_derivative(lambda p: circle_reference._signed_distances(p, x, z, r2),
                                 params, method='3-point', abs_step=1e-6)
         gradient = np.abs(jac.T @ dist).max()
         assert gradient < 1e-9 * np.linalg.norm(jac) * max(np.linalg.norm(dist), 1e-6)
+        # The cost it reports is the sum of squared distances (at the last evaluated
+        # parameters, within its final step of these).
+        assert cost == pytest.approx(float(dist @ dist), rel=1e-9, abs=1e-30)
 
 
 def test_pratt_start_matches_the_generalised_eigenproblem():
     from scipy.linalg import eig
     for _, _, points in FINGERS[::7]:
         x, z, r2 = _scaled(points)
-        vec = shape_kernels._pratt(x, z, r2)
+        vec = circle_kernels._pratt(x, z, r2)
         design = np.column_stack([r2, x, z, np.ones_like(x)])
         values, vectors = eig(design.T @ design, circle_reference._PRATT)
         best = min((abs(v), w.real) for v, w in zip(values, vectors.T)
@@ -101,7 +104,7 @@ def test_fit_rejects_bad_points():
     with pytest.raises(ValueError, match='finite'):
         fit_circle([[0.0, 0.0], [1.0, np.nan], [2.0, 0.0]])
     # The batched kernel does not raise: a non-finite scene gets NaN.
-    assert np.all(np.isnan(shape_kernels.circle_fit(np.full((5, 2), np.nan))))
+    assert np.all(np.isnan(circle_kernels.circle_fit(np.full((5, 2), np.nan))))
 
 
 @pytest.mark.parametrize('reconstruction', ['paper', 'consistent'])
@@ -109,11 +112,11 @@ def test_ccm_samples_equal_the_numpy_reference(reconstruction):
     solver = CCMSolver(ActuatorDesign.paper(0.40), 8, reconstruction=reconstruction)
     for pressure in (0.0, 250e3):
         result = solver.solve(pressure, (0.2, -0.3))
-        points, tangent = shape_kernels.ccm_samples(result.q, solver.segments.lengths, 16)
         ref_points, ref_tangent = ccm_reference.midplane_samples(
-            result.q, solver.segments.lengths, 16)
-        np.testing.assert_allclose(points, ref_points, rtol=0, atol=1e-15)
-        np.testing.assert_allclose(tangent, ref_tangent, rtol=0, atol=1e-14)
+            result.state, solver.segments.lengths, 16)
+        # The result's samples, computed in the solve's compiled call (`shapes.ccm_outputs`).
+        np.testing.assert_allclose(result.points, ref_points, rtol=0, atol=1e-15)
+        np.testing.assert_allclose(result.tangent, ref_tangent, rtol=0, atol=1e-14)
 
 
 def test_batched_curvature_equals_every_scenes_result():

@@ -1,18 +1,22 @@
 """Rung a: the finger as one arc of uniform strain."""
 
+import functools
+
 import numpy as np
 
-from .rung import ArcResult, RungSolver, set_common
+from .rung import RungSolver, set_common
 from ..engine import CompiledProblem, linear_solve, NewtonOptions, register
-from ..kernels import arc as arc_kernels
+from ..kernels import arc as arc_kernels, shapes
 from ..kernels.chain import load_arrays
 from ..kernels.pcc_section import half_angle_sinc_kernel, section_arrays
+from ..result import finger_constants
 from ..section.law import station_layout
+from ..validation import arc_lengths
 
-__all__ = ['ArcSolver']
+__all__ = ['ArcSolver', 'positions_at']
 
 # The engine runs this discretisation compiled through these hooks (`engine.register`).
-register(arc_kernels.ArcData, arc_kernels.ARC_HOOKS)
+register(arc_kernels.ArcData, dict(arc_kernels.ARC_HOOKS, outputs=shapes.arc_outputs))
 
 #: Gauss rule on [0, 1] for the arc integrals int_0^1 (cos, sin)(phi t) t^k dt; exact to
 #: round-off for |phi| up to about 40 rad (several full turns).
@@ -50,7 +54,6 @@ class ArcSolver(RungSolver):
 
     """
 
-    _result_type = ArcResult
     rung = 'arc'
 
     def __init__(self, design, pressure_model=None, tol=1e-12, samples=129,
@@ -65,15 +68,14 @@ class ArcSolver(RungSolver):
         self.gradient_scale = float(self.law.stiffness[:, 0, 0].max()) * self.length
         self._options = NewtonOptions(max_iterations=self.max_iterations, xtol=self.tol,
                                       max_step=0.5, flat_slope=1e-14, energy_scale=1e-6)
+        self.edges = np.array([0.0, self.length])
         self._data = arc_kernels.ArcData(*section_arrays(self.law, np.zeros(1, dtype=int)),
                                          float(self.pressure_coefficient), float(self.length),
-                                         self._scale, _ARC_T, _ARC_W)
+                                         self._scale, _ARC_T, _ARC_W, self.samples)
         #: What the engine runs: the compiled data, never this object.
         self.engine_problem = CompiledProblem(self._data, self._data, self.flat(),
                                               self.gradient_scale)
-
-    def _compatible(self, other):
-        return isinstance(other, ArcSolver)
+        self._constants = finger_constants(self.rung, self.n_segments, self.edges)
 
     def _flat_state(self):
         return np.zeros(3)
@@ -113,33 +115,40 @@ class ArcSolver(RungSolver):
         return (np.array([self.tip_node], dtype=np.int64), force.reshape(1, 2)) \
             if force.any() else load_arrays([])
 
-    def material_points(self, result, s):
-        """(X, Z) [m] of the material points at reference arc lengths s (K,): on the arc."""
-        eps, kappa = result.state[0], result.state[1]
-        turn = np.ascontiguousarray(kappa * s)
-        chord = (1.0 + eps) * s * half_angle_sinc_kernel(turn, 0)[0]
-        return np.stack([chord * np.cos(0.5 * turn), chord * np.sin(0.5 * turn)], axis=1)
-
     def turning(self, y):
         """Return the turning kappa L [rad] of the arc of state y = (eps, kappa, c1)."""
         return y[1] * self.length
 
-    def _outputs(self, y, pressure, force):
-        length = self.length
-        s = np.linspace(0.0, length, self.samples)
-        # The position at s is s (1 + eps) I_0(kappa s): the arc integral with phi = kappa s.
-        arg = np.multiply.outer(y[1] * s, _ARC_T)
-        i0 = np.stack([np.cos(arg) @ _ARC_W, np.sin(arg) @ _ARC_W])
-        stretch = 1.0 + y[0]
-        points = (stretch * s * i0).T
-        tip = points[-1].copy()
-        d = 0.5 * y[1]
-        loads = [(self.tip_node, np.asarray(force, dtype=float))]
-        return {
-            'points': points, 'tangent': y[1] * s,
-            'strains': np.tile(y, (self.samples, 1)), 'tip': tip,
-            'beta': np.array([self.turning(y)]),
-            'coefficients': np.array([[y[0], -2.0 * d * d / 3.0, y[2], d]]),
-            'nodes': np.array([[0.0, 0.0], tip]),
-            'energy': float(self.energy(self._pack(y), pressure, loads)),
-        }
+    def _positions(self, x, pressure, force):
+        """Return the `position_at` of a result at scaled unknowns `x`."""
+        y = self._unpack(x)
+        return functools.partial(positions_at, float(y[0]), float(y[1]), self.length)
+
+
+def positions_at(eps, kappa, length, s):
+    """
+    Midplane position of the arc's material points at reference arc lengths `s` [m].
+
+    The point at s is (1 + eps) s S(kappa s) along (cos, sin)(kappa s / 2), exactly on the
+    arc; a result's `position_at` is this function of its own strains.
+
+    Parameters
+    ----------
+    eps, kappa : float
+        Axial strain [-] and curvature per reference length [1/m].
+    length : float
+        Free length L [m].
+    s : float or array_like
+        Reference arc length from the clamp edge, in [0, L] [m].
+
+    Returns
+    -------
+    ndarray, shape s.shape + (2,)
+        Global (X, Z) [m].
+
+    """
+    values, shape = arc_lengths('s', s, length)
+    turn = np.ascontiguousarray(kappa * values)
+    chord = (1.0 + eps) * values * half_angle_sinc_kernel(turn, 0)[0]
+    points = np.stack([chord * np.cos(0.5 * turn), chord * np.sin(0.5 * turn)], axis=1)
+    return points.reshape(shape + (2,))

@@ -5,35 +5,36 @@ import math
 
 import numpy as np
 
-from .ccm_geometry import (from_scaled, material_positions, midplane_samples, node_positions,
-                           to_scaled)
+from .ccm_geometry import material_positions, to_scaled
 from .. import engine
-from ..analysis import CircleFitted, flexural_rigidity
+from ..analysis import flexural_rigidity
 from ..design import ActuatorDesign
 from ..engine import linear_solve, linear_step, NewtonOptions, SolverStatus
-from ..kernels import ccm as kernels
+from ..kernels import ccm as kernels, shapes
 from ..kernels.chain import load_arrays, node_jacobian
+from ..result import finger_constants, finger_result, Result
 from ..section.segments import build_segments, uniform_edges
-from ..validation import (arc_lengths, check_force, check_load, check_pressure_model,
-                          PRESSURE_MODELS, real_number, warm_start_allowed)
+from ..validation import (arc_lengths, check_force, check_load, check_outputs,
+                          check_pressure_model, PRESSURE_MODELS, real_number,
+                          warm_start_allowed)
 
-__all__ = ['CCMSolver', 'CCMResult', 'RigidityResult', 'SolverStatus', 'AXES', 'check_rigidity',
-           'rigidity_result', 'pressure_work_factor']
+__all__ = ['CCMSolver', 'SolverStatus', 'AXES', 'check_rigidity', 'rigidity_result',
+           'pressure_work_factor', 'positions_at', 'CCM_RUNGS', 'RIGIDITY_FIELDS']
 
 # The engine runs this discretisation compiled through these hooks (`engine.register`).
-engine.register(kernels.CCMData, kernels.CCM_HOOKS)
+engine.register(kernels.CCMData, dict(kernels.CCM_HOOKS, outputs=shapes.ccm_outputs))
 
 #: Midplane reconstructions: the paper's, or one that converges to the rod as N grows
 #: (ccm_geometry.consistent_strain_map).
 RECONSTRUCTIONS = ('paper', 'consistent')
+#: The rungs a CCMSolver is: its states warm-start one another where the edges agree.
+CCM_RUNGS = ('ccm', 'ccm_consistent', 'ccm_aligned')
 #: Largest Newton step in any scaled unknown; keeps iterates where the quintic PEMC
 #: energy (unbounded below at large tension) is meaningful.
 _MAX_STEP = 0.5
 
 
 _MESSAGES = {
-    SolverStatus.SUCCESS: 'converged: relative gradient {grad:.1e} <= {gtol:.0e} and last step '
-                          '{step:.1e} <= {xtol:.0e}',
     SolverStatus.MAX_ITERATIONS: 'not converged after {iterations} Newton iterations '
                                  '(relative gradient {grad:.1e})',
     SolverStatus.LINE_SEARCH_FAILED: 'line search found no decrease (relative gradient '
@@ -57,221 +58,42 @@ def pressure_work_factor(design, pressure_model=None):
     return design.pressure_work_factor if name == 'design' else PRESSURE_MODELS[name]
 
 
-class ResultPositions:
-    """Mixin of a solver result: `position_at`, through the solver's `material_points`."""
-
-    def position_at(self, s):
-        """
-        Midplane position of the material point at reference arc length `s` from the clamp.
-
-        Exact for the result's own kinematics (the CCM's segment polynomials, the arcs of
-        the PCC and the arc rung, the extensible rod's integral of (1 + eps)(cos, sin)
-        theta).
-
-        Parameters
-        ----------
-        s : float or array_like
-            Reference (undeformed) arc length from the clamp edge, in [0, L] [m].
-
-        Returns
-        -------
-        ndarray, shape s.shape + (2,)
-            Global (X, Z) [m].
-
-        Raises
-        ------
-        ValueError, TypeError
-            Where `s` is not a real number in [0, L].
-
-        References
-        ----------
-        docs/physics.md, section 13.
-
-        """
-        values, shape = arc_lengths('s', s, self.solver.design.free_length)
-        return self.solver.material_points(self, values).reshape(shape + (2,))
-
-
-class CCMResult(ResultPositions, CircleFitted):
+def positions_at(q, edges, length, s):
     """
-    Equilibrium of one finger, with OptimizeResult-like fields.
+    Midplane position of the CCM's material points at reference arc lengths `s` from the clamp.
 
-    Attributes
+    Exact for the CCM's kinematics: the segment polynomials of eqs. (13) and (15), as drawn
+    (`ccm_geometry.material_positions`). A result's `position_at` is this function of its
+    own state and edges.
+
+    Parameters
     ----------
-    success : bool
-        True only for a converged, stable equilibrium.
-    status : SolverStatus
-        Outcome code; `message` explains it.
-    message : str
-    iterations : int
-        Newton iterations, continuation steps included.
-    coefficients : ndarray, shape (N, 4)
-        (b1 [-], b3 [1/m^2], c1 [-], d [1/m]) of each segment.
-    points : ndarray, shape (M, 2)
-        Global (X, Z) midplane samples [m].
-    tangent : ndarray, shape (M,)
-        Tangent angle of each sample from +X towards +Z [rad].
-    tip : ndarray, shape (2,)
-        Global (X, Z) of the tip [m].
-    nodes : ndarray, shape (N + 1, 2)
-        Segment nodes [m].
-    beta : ndarray, shape (N,)
-        End rotations [rad].
-    valid : bool
-        Every segment obeys the small-rotation rule |2 d L_i| < 1.
-    curvature, fit_rmsd : float
-        Signed curvature of the least-squares circle [1/m] and its RMSD [m].
-    pressure : float
-        Gauge pressure [Pa].
-    tip_force : tuple of float
-        (f0, p0) [N].
-    energy : float
-        Total potential [J].
+    q : ndarray, shape (N, 4)
+        Scaled unknowns.
+    edges : ndarray, shape (N + 1,)
+        Segment edges [m].
+    length : float
+        Free length L [m].
+    s : float or array_like
+        Reference (undeformed) arc length from the clamp edge, in [0, L] [m].
 
-    """
+    Returns
+    -------
+    ndarray, shape s.shape + (2,)
+        Global (X, Z) [m].
 
-    def __init__(self, solver, q, status, iterations, gradient, step, pressure, loads,
-                 tip_force, min_eig=float('nan'), fraction=1.0):
-        self.solver = solver
-        self.q = q
-        self.status = status if type(status) is SolverStatus else SolverStatus(status)
-        self.success = self.status is SolverStatus.SUCCESS
-        self.iterations = int(iterations)
-        self.gradient_norm = float(gradient)
-        self.last_step = float(step)
-        self.pressure = float(pressure)
-        self.tip_force = (float(tip_force[0]), float(tip_force[1]))
-        self.point_loads = tuple(loads)
-        # Derived fields are built on first use: a controller polling tips pays for
-        # neither the message nor the coefficients it does not read.
-        self._figures = (gradient, step, iterations, min_eig, fraction)
+    Raises
+    ------
+    ValueError, TypeError
+        Where `s` is not a real number in [0, L].
 
-    @property
-    def _message_args(self):
-        grad, step, iterations, min_eig, fraction = self._figures
-        return dict(grad=grad, gtol=self.solver.gtol, step=step, xtol=self.solver.xtol,
-                    iterations=iterations, min_eig=min_eig, fraction=fraction)
-
-    @functools.cached_property
-    def rotation_measure(self):
-        """|2 d L_i| of every segment, shape (N,): the small-rotation rule wants < 1."""
-        return np.abs(2.0 * self.q[:, 3])
-
-    @functools.cached_property
-    def valid(self):
-        """Every segment obeys the small-rotation rule |2 d L_i| < 1."""
-        return bool(self.small_rotations(self.q))
-
-    @staticmethod
-    def small_rotations(q):
-        """Whether states q (..., N, 4) obey |2 d L_i| < 1 in every segment, shape (...)."""
-        return np.all(np.abs(2.0 * q[..., 3]) < 1.0, axis=-1)
-
-    @functools.cached_property
-    def message(self):
-        """What happened, with the figures behind `status`."""
-        text = _MESSAGES[self.status].format(**self._message_args)
-        if self.success and not self.valid:
-            worst = int(np.argmax(self.rotation_measure))
-            text += (f'; segment {worst} breaks the small-rotation rule '
-                     f'|2 d L| = {self.rotation_measure[worst]:.3f} >= 1 (valid=False)')
-        return text
-
-    @functools.cached_property
-    def coefficients(self):
-        """(b1 [-], b3 [1/m^2], c1 [-], d [1/m]) of each segment, shape (N, 4)."""
-        return from_scaled(self.q, self.solver.segments.lengths)
-
-    @functools.cached_property
-    def _chain(self):
-        return node_positions(self.q, self.solver.segments.lengths)
-
-    @property
-    def nodes(self):
-        """Segment nodes O_1..O_{N+1}, shape (N + 1, 2) [m]."""
-        return self._chain[0]
-
-    @property
-    def theta(self):
-        """Node angles theta_i, shape (N,) [rad]."""
-        return self._chain[1]
-
-    @property
-    def beta(self):
-        """End rotations beta_i, shape (N,) [rad]."""
-        return self._chain[2]
-
-    @property
-    def tip(self):
-        """Global (X, Z) of the tip, shape (2,) [m]."""
-        return self._chain[0][-1]
-
-    @functools.cached_property
-    def _samples(self):
-        return midplane_samples(self.q, self.solver.segments.lengths,
-                                self.solver.samples_per_segment)
-
-    @property
-    def points(self):
-        """Global (X, Z) midplane samples, m per segment then the tip, shape (M, 2) [m]."""
-        return self._samples[0]
-
-    @property
-    def tangent(self):
-        """Tangent angle of each sample from +X towards +Z, shape (M,) [rad]."""
-        return self._samples[1]
-
-    @property
-    def x(self):
-        """Alias of `coefficients` flattened, as in scipy's OptimizeResult."""
-        return self.coefficients.ravel()
-
-    @functools.cached_property
-    def energy(self):
-        """Total potential at this state [J]."""
-        return self.solver._total_energy(self.q, self.pressure, self.point_loads)
-
-    def __repr__(self):
-        return (f'CCMResult(success={self.success}, status={self.status.name}, '
-                f'iterations={self.iterations}, tip={self.tip.round(6).tolist()}, '
-                f'valid={self.valid})')
-
-
-class RigidityResult:
-    """
-    Flexural rigidity by displacement control, eq. (22).
-
-    Attributes
+    References
     ----------
-    value : float
-        K_x or K_z [N m^2].
-    force : float
-        End load that produces the displacement [N].
-    lever : float
-        Lever arm |Z_tip| (axis x) or |X_tip| (axis z) in the loaded state [m].
-    displacement : float
-        Imposed tip displacement [m].
-    success, message : bool, str
-    unloaded, loaded : CCMResult
+    docs/physics.md, section 13.
 
     """
-
-    def __init__(self, axis, displacement, force, lever, success, message, unloaded, loaded,
-                 iterations):
-        self.axis = axis
-        self.displacement = float(displacement)
-        self.force = float(force)
-        self.lever = float(lever)
-        self.value = flexural_rigidity(force, lever, displacement) if success else float('nan')
-        self.success = bool(success)
-        self.message = message
-        self.unloaded = unloaded
-        self.loaded = loaded
-        self.iterations = int(iterations)
-
-    def __repr__(self):
-        return (f'RigidityResult(axis={self.axis!r}, value={self.value:.6g}, '
-                f'force={self.force:.6g}, lever={self.lever:.6g}, success={self.success})')
+    values, shape = arc_lengths('s', s, length)
+    return material_positions(q, edges, values).reshape(shape + (2,))
 
 
 class CCMSolver:
@@ -305,6 +127,9 @@ class CCMSolver:
         see `ccm_geometry.consistent_strain_map`. With 'consistent', `coefficients`
         hold the reconstruction coefficients; map them with that function to get
         the strain's (b1, b3, c1, d).
+    rung : {None, 'ccm', 'ccm_consistent', 'ccm_aligned'}
+        The ladder rung its results report; None: by the reconstruction ('ccm_aligned' is
+        the consistent CCM on `selection.aligned_edges`).
 
     References
     ----------
@@ -314,7 +139,7 @@ class CCMSolver:
 
     def __init__(self, design, n_segments=8, pressure_model=None, segment_edges=None,
                  load_points=(), samples_per_segment=16, max_iterations=60, gtol=1e-10,
-                 xtol=1e-9, reconstruction='paper'):
+                 xtol=1e-9, reconstruction='paper', rung=None):
         if not isinstance(design, ActuatorDesign):
             raise TypeError(f'`design` must be an ActuatorDesign, got {type(design).__name__}')
         pressure_model = check_pressure_model(pressure_model)
@@ -330,7 +155,9 @@ class CCMSolver:
                              f'got {reconstruction!r}')
         self.reconstruction = reconstruction
         #: The ladder rung this solver is ('ccm_aligned' when `selection` aligns its edges).
-        self.rung = 'ccm' if reconstruction == 'paper' else 'ccm_consistent'
+        self.rung = rung or ('ccm' if reconstruction == 'paper' else 'ccm_consistent')
+        if self.rung not in CCM_RUNGS:
+            raise ValueError(f'`rung` must be one of {CCM_RUNGS}, got {rung!r}')
         self.design = design
         self.pressure_model = pressure_model
         self.pressure_coefficient = pressure_work_factor(design, pressure_model)
@@ -357,15 +184,25 @@ class CCMSolver:
         self._options = NewtonOptions(max_iterations=self.max_iterations, gtol=self.gtol,
                                       xtol=self.xtol, max_step=_MAX_STEP,
                                       energy_scale=self.gradient_scale)
+        # The message of a converged solve with the tolerances in: two figures per solve.
+        self._converged = (f'converged: relative gradient %.1e <= {self.gtol:.0e} and last '
+                           f'step %.1e <= {self.xtol:.0e}')
         # The compiled discretisations the engine runs: unloaded (block Hessian), loaded.
         self._data = {loaded: kernels.ccm_data(self.segments, design.prestrain,
                                                design.emc_coefficients,
                                                self.pressure_coefficient,
-                                               reconstruction == 'consistent', loaded)
+                                               reconstruction == 'consistent', loaded,
+                                               self.samples_per_segment)
                       for loaded in (False, True)}
         #: What the engine runs: the compiled data, never this object.
         self.engine_problem = engine.CompiledProblem(self._data[False], self._data[True],
                                                      self.flat(), self.gradient_scale)
+        self._constants = finger_constants(self.rung, self.n_segments, self.segments.edges)
+
+    @property
+    def edges(self):
+        """Segment edges from 0 to the free length, (N + 1,) [m]."""
+        return self.segments.edges
 
     # -- energy -----------------------------------------------------------
     def _total_energy(self, q, pressure, loads):
@@ -373,10 +210,9 @@ class CCMSolver:
                                   float(pressure), *load_arrays(loads))
 
     def _loads(self, tip_force, point_loads):
-        """Convert the tip force and (s, fx, fz) point loads to (node index, force) pairs."""
+        """Convert a checked tip force and (s, fx, fz) point loads to (node, force) pairs."""
         loads = []
-        f0 = real_number('tip_force[0]', tip_force[0], '[N]')
-        p0 = real_number('tip_force[1]', tip_force[1], '[N]')
+        f0, p0 = tip_force
         if f0 or p0:
             loads.append((self.n_segments, np.array([f0, p0])))
         for item in point_loads:
@@ -420,30 +256,28 @@ class CCMSolver:
         """Position of a node [m] and its derivatives in the scaled unknowns, (2, N, 4)."""
         return node_jacobian(q, self.segments.lengths, node)
 
-    def material_points(self, result, s):
-        """(X, Z) [m] of the material points at reference arc lengths s (K,) of a result."""
-        return material_positions(result.q, self.segments.edges, s)
-
     def _initial_state(self, initial):
         """Scaled warm start from a result or an (N, 4) SI array; None for a fresh solve."""
         n = self.n_segments
         if initial is None:
             return None
-        if isinstance(initial, CCMResult):
-            if initial.solver is not self and not np.array_equal(
-                    initial.solver.segments.edges, self.segments.edges):
-                raise ValueError('`initial` result comes from a different segmentation; '
-                                 f'expected {n} segments with the same edges')
-            return initial.q.copy()
+        if isinstance(initial, Result):
+            edges = initial.segment_edges
+            if initial.rung not in CCM_RUNGS or not (
+                    edges is self.segments.edges or np.array_equal(edges, self.segments.edges)):
+                raise ValueError('`initial` result comes from another model or segmentation; '
+                                 f'expected a CCM of {n} segments with the same edges')
+            return initial.x
         arr = np.asarray(initial, dtype=float)
         if arr.shape != (n, 4):
-            raise ValueError(f'`initial` must be a CCMResult or an ({n}, 4) array of '
+            raise ValueError(f'`initial` must be a CCM result or an ({n}, 4) array of '
                              f'(b1, b3, c1, d) in SI, got shape {arr.shape}')
         if not np.all(np.isfinite(arr)):
             raise ValueError('`initial` must be finite')
         return to_scaled(arr, self.segments.lengths)
 
-    def solve(self, pressure=0.0, tip_force=(0.0, 0.0), initial=None, point_loads=()):
+    def solve(self, pressure=0.0, tip_force=(0.0, 0.0), initial=None, point_loads=(), *,
+              outputs='all', model_choice=None):
         """
         Find the equilibrium at a gauge pressure and tip load.
 
@@ -453,18 +287,28 @@ class CCMSolver:
             Gauge pressure P >= 0 [Pa].
         tip_force : (float, float)
             (f0, p0), tip force along global X and Z [N].
-        initial : CCMResult or array_like (N, 4), optional
-            Warm start: Newton starts there, and if that does not reach a stable
-            equilibrium the solve starts again from the flat state as with None. It
-            changes the iteration count, never the answer.
+        initial : Result or array_like (N, 4), optional
+            Warm start: a CCM result of the same edges, or (b1, b3, c1, d) in SI. Newton
+            starts there, and if that does not reach a stable equilibrium the solve starts
+            again from the flat state as with None. It changes the iteration count, never
+            the answer.
         point_loads : sequence of (s, fx, fz)
             Extra loads at intermediate arc lengths s that are segment edges [m, N, N].
+        outputs : {'all', 'shape', 'tip'}
+            What the result holds besides the state (`result.FINGER_FIELDS`): 'tip' the
+            chain (tip, nodes, rotations, coefficients, validity); 'shape' also the energy
+            and the midplane samples; 'all' (the default) also their circle fit. Fields
+            not asked for are None. All are computed in the solve's one compiled call.
+        model_choice : ModelChoice, optional
+            The choice that picked this model (`AdaptiveSolver` passes it), recorded in
+            the result.
 
         Returns
         -------
-        CCMResult
-            `success` False (with a message) when Newton and continuation both fail;
-            the state returned is then the last iterate and must not be used as truth.
+        Result
+            `FINGER_FIELDS`; `success` False (with a message) when Newton and continuation
+            both fail: the state returned is then the last iterate and must not be used
+            as truth.
 
         Raises
         ------
@@ -484,23 +328,40 @@ class CCMSolver:
         Zhou, Headings, Dapino (2022), eq. (21); docs/physics.md, section 8.
 
         """
+        level = check_outputs(outputs)
         pressure, tip_force = check_load(pressure, tip_force, self.design.max_pressure)
         loads = self._loads(tip_force, point_loads)
         start = self._initial_state(initial)
-        if not warm_start_allowed(sum(math.hypot(*force) for _, force in loads)):
+        if start is not None and not warm_start_allowed(
+                sum(math.hypot(*force) for _, force in loads)):
             start = None
-        out = engine.solve(self.engine_problem, pressure, loads, self._options, start)
-        return self._result(out.x, out.status, out.iterations, out.gradient, out.step,
-                            out.min_eig, out.fraction, pressure, loads, tip_force)
+        outcome = engine.solve(self.engine_problem, pressure, loads, self._options, start, level)
+        return self._result(outcome, pressure, tip_force, tuple(point_loads), model_choice)
 
-    def _result(self, x, status, iterations, gradient, step, min_eig, fraction, pressure, loads,
-                tip_force):
-        """Build the result of an engine solve (a single one or a batch's scene)."""
-        return CCMResult(self, x, status, iterations, gradient, step, pressure, loads,
-                         tip_force, min_eig, fraction)
+    def _result(self, outcome, pressure, tip_force, point_loads=(), model_choice=None,
+                level=None):
+        """Build the Result of an engine outcome and its fields (a solve, or a batch's scene)."""
+        q = outcome.x
+        fields = outcome.fields
+        if outcome.status is SolverStatus.SUCCESS:
+            message = self._converged % (outcome.gradient, outcome.step)
+        else:
+            message = _MESSAGES[outcome.status].format(
+                grad=outcome.gradient, step=outcome.step, iterations=outcome.iterations,
+                min_eig=outcome.min_eig, fraction=outcome.fraction)
+        if outcome.status is SolverStatus.SUCCESS and not fields.valid:
+            turn = np.abs(2.0 * q[:, 3])
+            worst = int(np.argmax(turn))
+            message += (f'; segment {worst} breaks the small-rotation rule '
+                        f'|2 d L| = {turn[worst]:.3f} >= 1 (valid=False)')
+        return finger_result(outcome, message, pressure, tip_force, q,
+                             functools.partial(positions_at, q, self.segments.edges,
+                                               self.design.free_length),
+                             self._constants, point_loads, model_choice)
 
     # -- rigidity -----------------------------------------------------------
-    def rigidity(self, pressure=0.0, axis='x', displacement=0.010, initial=None):
+    def rigidity(self, pressure=0.0, axis='x', displacement=0.010, initial=None, *,
+                 outputs='tip'):
         """
         Flexural rigidity at fixed pressure by displacement control, eq. (22).
 
@@ -516,27 +377,29 @@ class CCMSolver:
             Load and displacement direction.
         displacement : float
             Tip displacement delta > 0 [m].
-        initial : CCMResult or array_like, optional
+        initial : Result or array_like, optional
             Warm start of the unloaded solve.
+        outputs : {'tip', 'shape', 'all'}
+            What the `unloaded` and `loaded` results hold, as `solve`'s; 'tip' (the
+            default) costs least.
 
         Returns
         -------
-        RigidityResult
-            K_x = f0 |Z_tip|^3 / (3 delta) or K_z = p0 |X_tip|^3 / (3 delta), levers
-            in the loaded state [N m^2].
+        Result
+            `RIGIDITY_FIELDS`: value K_x = f0 |Z_tip|^3 / (3 delta) or K_z = p0 |X_tip|^3 /
+            (3 delta) [N m^2], levers in the loaded state.
 
         References
         ----------
         Zhou, Headings, Dapino (2022), eq. (22); docs/physics.md, section 10.
 
         """
+        level = check_outputs(outputs)
         delta = check_rigidity(axis, displacement)
-        unloaded = self.solve(pressure, (0.0, 0.0), initial=initial)
-        if not unloaded.success:
-            return rigidity_result(self, axis, delta, pressure, unloaded)
-        out = engine.rigidity(self.engine_problem, unloaded.q, pressure, self.n_segments,
-                              AXES[axis], delta, self._options)
-        return rigidity_result(self, axis, delta, pressure, unloaded, out)
+        pressure = check_load(pressure, (0.0, 0.0), self.design.max_pressure)[0]
+        out = engine.rigidity(self.engine_problem, pressure, self.n_segments, AXES[axis],
+                              delta, self._options, self._initial_state(initial), level)
+        return rigidity_result(self, axis, delta, pressure, out, level)
 
 
 #: Unit load and displacement direction of each rigidity axis.
@@ -553,44 +416,75 @@ def check_rigidity(axis, displacement):
     return delta
 
 
-def rigidity_result(solver, axis, delta, pressure, unloaded, out=None):
+#: The fields of a rigidity's `Result`.
+RIGIDITY_FIELDS = {
+    'value': 'K_x or K_z [N m^2]; NaN where not found',
+    'force': 'end load that produces the displacement [N]',
+    'lever': 'lever arm |Z_tip| (axis x) or |X_tip| (axis z) in the loaded state [m]',
+    'axis': "'x' or 'z'",
+    'displacement': 'imposed tip displacement [m]',
+    'success': 'the unloaded and the displacement-controlled solves both converged',
+    'message': 'what happened',
+    'iterations': 'unloaded plus bordered Newton iterations',
+    'unloaded': "the unloaded solve's Result",
+    'loaded': "the loaded state's Result under the found force (None where the unloaded "
+              'solve failed)',
+    'model': "the rung and N, as the results'",
+}
+
+
+def rigidity_result(solver, axis, delta, pressure, out, level):
     """
-    Build the RigidityResult of a displacement-controlled solve, eq. (22).
+    Build the Result of a displacement-controlled solve, eq. (22) (`RIGIDITY_FIELDS`).
 
     Parameters
     ----------
     solver : CCMSolver or ladder solver
-        Builds the loaded state's result (`_result`).
+        Builds the finger results (`_result`).
     axis : {'x', 'z'}
     delta : float
         [m].
     pressure : float
         [Pa].
-    unloaded : result
-        The unloaded solve; a failed one gives a failed RigidityResult.
-    out : engine.BorderedOutcome, optional
-        The displacement control from `unloaded` (None when that failed).
+    out : engine.BorderedOutcome
+        `engine.rigidity`'s: the unloaded solve and the displacement control from it.
+    level : int
+        Of the outputs of both results (`validation.OUTPUT_LEVELS`), for a rung whose own
+        code computes them.
 
     """
-    if not unloaded.success:
-        return RigidityResult(axis, delta, math.nan, math.nan, False,
-                              'unloaded solve failed: ' + unloaded.message, unloaded, None,
-                              unloaded.iterations)
+    unloaded = out.unloaded
+    free = solver._result(unloaded, pressure, (0.0, 0.0), level=level)
+    if not free.success:
+        return _rigidity(axis, delta, math.nan, math.nan, False,
+                         'unloaded solve failed: ' + free.message, free, None,
+                         free.iterations)
     k = 0 if axis == 'x' else 1
-    direction = AXES[axis]
+    force = out.force * AXES[axis]
+    tip_force = (float(force[0]), float(force[1]))
     iterations = unloaded.iterations + out.iterations
-    force = out.force * direction
-    loads = [(solver.n_segments, force)]
     if not out.success:
-        loaded = solver._result(out.x, SolverStatus.CONTINUATION_FAILED, iterations, math.inf,
-                                math.inf, math.nan, out.fraction, pressure, loads, tuple(force))
-        return RigidityResult(axis, delta, out.force, math.nan, False,
-                              f'displacement control stalled at {out.fraction:.1%} '
-                              'of the displacement', unloaded, loaded, iterations)
-    loaded = solver._result(out.x, SolverStatus.SUCCESS, iterations, out.gradient, 0.0,
-                            math.nan, 1.0, pressure, loads, tuple(force))
+        loaded = solver._result(engine.NewtonOutcome(
+            out.x, SolverStatus.CONTINUATION_FAILED, iterations, math.inf, math.inf,
+            math.nan, out.fraction, out.fields), pressure, tip_force, level=level)
+        return _rigidity(axis, delta, out.force, math.nan, False,
+                         f'displacement control stalled at {out.fraction:.1%} of the '
+                         'displacement', free, loaded, iterations)
+    loaded = solver._result(engine.NewtonOutcome(out.x, SolverStatus.SUCCESS, iterations,
+                                                 out.gradient, 0.0, math.nan, 1.0, out.fields),
+                            pressure, tip_force, level=level)
     message = 'converged' + ('' if out.stable else
                              ' (loaded state is unstable under force control)')
     # The lever is the loaded node's position that the displacement control constrains.
-    return RigidityResult(axis, delta, out.force, abs(float(out.tip[1 - k])), True, message,
-                          unloaded, loaded, iterations)
+    return _rigidity(axis, delta, out.force, abs(float(out.tip[1 - k])), True, message, free,
+                     loaded, iterations)
+
+
+def _rigidity(axis, delta, force, lever, success, message, unloaded, loaded, iterations):
+    return Result.of({
+        'value': flexural_rigidity(force, lever, delta) if success else math.nan,
+        'force': float(force), 'lever': float(lever), 'axis': axis,
+        'displacement': float(delta), 'success': bool(success), 'message': message,
+        'iterations': int(iterations), 'unloaded': unloaded, 'loaded': loaded,
+        'model': unloaded.model,
+    })

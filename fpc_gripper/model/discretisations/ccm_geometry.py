@@ -2,9 +2,9 @@
 
 import numpy as np
 
-from ..kernels import chain, shapes as shape_kernels
+from ..kernels import chain
 
-__all__ = ['to_scaled', 'from_scaled', 'end_rotation', 'node_positions', 'midplane_samples',
+__all__ = ['to_scaled', 'from_scaled', 'end_rotation', 'node_positions',
            'material_positions', 'consistent_strain_map', 'consistent_from_strain']
 
 # q = (b1, b3 L^2, c1, d L) is dimensionless; these columns take it to SI and back.
@@ -56,23 +56,6 @@ def node_positions(q, lengths):
     return chain.node_positions(q, lengths)
 
 
-def midplane_samples(q, lengths, per_segment=16):
-    """
-    Midplane samples at x = L_i j/m, j = 0..m-1 of every segment, then the tip (compiled).
-
-    Returns
-    -------
-    points : ndarray, shape (N m + 1, 2)
-        Global (X, Z) [m].
-    tangent : ndarray, shape (N m + 1,)
-        Angle of the tangent from +X towards +Z [rad].
-
-    """
-    return shape_kernels.ccm_samples(np.ascontiguousarray(q, dtype=float),
-                                     np.ascontiguousarray(lengths, dtype=float),
-                                     int(per_segment))
-
-
 def _segment_points(q, lengths, nodes, theta, segment, xi):
     """
     Global (X, Z) of the points at xi = x / L_i of segments `segment` (eq. 13, then eq. 15).
@@ -95,7 +78,7 @@ def material_positions(q, edges, s):
 
     The point at s lies in segment i (edges[i] <= s < edges[i + 1], the last segment
     for s = L) at x = s - edges[i], and its position is O_i + R(theta_i) (U(x), W(x)) of
-    eqs. (13) and (15): exactly the drawn midplane (`midplane_samples`).
+    eqs. (13) and (15): exactly the drawn midplane (a result's `points`).
 
     Parameters
     ----------

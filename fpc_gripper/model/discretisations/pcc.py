@@ -1,19 +1,22 @@
 """Piecewise-constant-strain rod (PCC): the finger as N exact arcs, solved with a banded Newton."""
 
+import functools
+
 import numpy as np
 
-from .rung import check_common, LadderResult, RungSolver, set_common
+from .rung import check_common, RungSolver, set_common
 from ..engine import CompiledProblem, NewtonOptions, register
-from ..kernels import linear, pcc as kernels
+from ..kernels import linear, pcc as kernels, shapes
 from ..kernels.pcc_section import half_angle_sinc_kernel, section_arrays
-from ..kernels.shapes import outputs_kernel
+from ..result import finger_constants
 from ..section.law import station_layout
 from ..section.segments import share_segments
+from ..validation import arc_lengths
 
-__all__ = ['PCCSolver', 'PCCResult', 'pcc_edges', 'half_angle_sinc']
+__all__ = ['PCCSolver', 'pcc_edges', 'half_angle_sinc', 'material_jacobian', 'positions_at']
 
 # The engine runs this discretisation compiled through these hooks (`engine.register`).
-register(kernels.PCCData, kernels.PCC_HOOKS)
+register(kernels.PCCData, dict(kernels.PCC_HOOKS, outputs=shapes.pcc_outputs))
 
 #: Step caps: 0.1 on (eps, c1) as the rod, 0.5 rad on the angles.
 _CAP = np.array([0.1, 0.1, 0.5])
@@ -87,19 +90,6 @@ def _point_arrays(pseg, poff, pz):
     """Face points as the kernels take them: (segment int64, offset, height) arrays."""
     return (np.ascontiguousarray(pseg, dtype=np.int64), np.ascontiguousarray(poff, dtype=float),
             np.ascontiguousarray(pz, dtype=float))
-
-
-class PCCResult(LadderResult):
-    """
-    Result of `PCCSolver`.
-
-    `state` is an (N, 3) array of (theta_i [rad], eps_i [-], c1_i [-]): the end angle
-    and the uniform axial and transverse strains of every segment; kappa_i =
-    (theta_i - theta_{i-1}) / L_i. `beta` holds theta_i - theta_{i-1} [rad],
-    `coefficients` the CCM coefficients (b1, b3, c1, d) = (eps, -kappa^2/6, c1,
-    kappa/2) [-, 1/m^2, -, 1/m] of a segment with the same uniform strain, `nodes` the
-    (N + 1, 2) segment ends [m]; `points` lie exactly on the arcs.
-    """
 
 
 class _Banded:
@@ -197,7 +187,6 @@ class PCCSolver(RungSolver):
 
     """
 
-    _result_type = PCCResult
     rung = 'pcc'
 
     def __init__(self, design, n_segments=64, pressure_model=None, tol=1e-12,
@@ -225,13 +214,12 @@ class PCCSolver(RungSolver):
                                       max_step=np.tile(_CAP, n),
                                       energy_scale=self.gradient_scale)
         self._data = kernels.PCCData(self.lengths, self._stiffness, self._gas, self._pemc,
-                                     float(self.pressure_coefficient), self.gradient_scale)
+                                     float(self.pressure_coefficient), self.gradient_scale,
+                                     self._sample_segment, self._sample_offset)
         #: What the engine runs: the compiled data, never this object.
         self.engine_problem = CompiledProblem(self._data, self._data, self.flat(),
                                               self.gradient_scale)
-
-    def _compatible(self, other):
-        return isinstance(other, PCCSolver) and np.array_equal(other.edges, self.edges)
+        self._constants = finger_constants(self.rung, self.n_segments, self.edges)
 
     def _flat_state(self):
         return np.zeros((self.n_segments, 3))
@@ -384,64 +372,91 @@ class PCCSolver(RungSolver):
                                             self.lengths, int(node))
 
     def material_jacobian(self, x, s):
-        """
-        Positions of the material points at reference arc lengths s and their derivatives.
+        """Positions of material points at arc lengths s, and their derivatives in x."""
+        return material_jacobian(x, self.edges, s)
 
-        The point at s in segment i, sigma = s - edge_i into it, is
-        O_i + (1 + eps_i) sigma S(rho Delta_i) (cos, sin)(theta_{i-1} + rho Delta_i / 2),
-        rho = sigma / L_i: exactly on the arc (rho = 1 gives the chord, so the node).
-        Written as the sum over every segment k of that partial chord with sigma_k =
-        clip(s - edge_k, 0, L_k), it is differentiated segment by segment.
+    def _positions(self, x, pressure, force):
+        """Return the `position_at` of a result at engine unknowns `x`."""
+        return functools.partial(positions_at, x, self.edges)
 
-        Parameters
-        ----------
-        x : ndarray, shape (3 N,)
-            Engine unknowns.
-        s : ndarray, shape (K,)
-            Arc lengths in [0, L] [m].
 
-        Returns
-        -------
-        positions : ndarray, shape (K, 2)
-            [m].
-        jacobian : ndarray, shape (K, 2, 3 N)
-            d position / d x [m per unit strain or radian].
+def material_jacobian(x, edges, s):
+    """
+    Positions of the material points at reference arc lengths s and their derivatives.
 
-        """
-        state = self._unpack(x)
-        theta, eps = state[:, 0], state[:, 1]
-        before = np.concatenate([[0.0], theta[:-1]])
-        sigma = np.clip(s[:, None] - self.edges[None, :-1], 0.0, self.lengths[None, :])
-        rho = sigma / self.lengths
-        turn = rho * (theta - before)                                    # (K, N)
-        sinc, dsinc = half_angle_sinc(turn, order=1)
-        angle = before + 0.5 * turn
-        along = np.stack([np.cos(angle), np.sin(angle)], axis=1)         # (K, 2, N)
-        normal = np.stack([-along[:, 1], along[:, 0]], axis=1)
-        reach = (1.0 + eps) * sigma                                      # (K, N)
-        chords = (reach * sinc)[:, None, :] * along
-        positions = chords.sum(axis=2)
-        jac = np.zeros((s.size, 2, self.n_segments, 3))
-        jac[..., 0] = (sigma * sinc)[:, None, :] * along
-        arc = (reach * rho * dsinc)[:, None, :] * along
-        bend = (reach * sinc)[:, None, :] * normal
-        jac[..., 2] = arc + (0.5 * rho)[:, None, :] * bend
-        # theta_{i-1} is theta of the segment before (theta_0 = 0 is clamped).
-        jac[..., :-1, 2] += (-arc + (1.0 - 0.5 * rho)[:, None, :] * bend)[..., 1:]
-        return positions, jac.reshape(s.size, 2, -1)
+    The point at s in segment i, sigma = s - edge_i into it, is
+    O_i + (1 + eps_i) sigma S(rho Delta_i) (cos, sin)(theta_{i-1} + rho Delta_i / 2),
+    rho = sigma / L_i: exactly on the arc (rho = 1 gives the chord, so the node).
+    Written as the sum over every segment k of that partial chord with sigma_k =
+    clip(s - edge_k, 0, L_k), it is differentiated segment by segment.
 
-    def material_points(self, result, s):
-        """(X, Z) [m] of the material points at reference arc lengths s (K,) of a result."""
-        return self.material_jacobian(self._pack(result.state), s)[0]
+    Parameters
+    ----------
+    x : ndarray, shape (3 N,)
+        Engine unknowns (eps_i, c1_i, theta_i) per segment.
+    edges : ndarray, shape (N + 1,)
+        Segment edges [m].
+    s : ndarray, shape (K,)
+        Arc lengths in [0, L] [m].
 
-    # -- outputs ------------------------------------------------------------
-    def _outputs(self, state, pressure, force):
-        nodes, points, tangent, strains, beta, coefficients, energy = outputs_kernel(
-            np.ascontiguousarray(state, dtype=float), self.lengths, self._stiffness,
-            self._gas, self._pemc, self.pressure_coefficient * pressure,
-            np.ascontiguousarray(force, dtype=float), self._sample_segment,
-            self._sample_offset)
-        return {
-            'points': points, 'tangent': tangent, 'strains': strains, 'tip': nodes[-1].copy(),
-            'beta': beta, 'coefficients': coefficients, 'nodes': nodes, 'energy': energy,
-        }
+    Returns
+    -------
+    positions : ndarray, shape (K, 2)
+        [m].
+    jacobian : ndarray, shape (K, 2, 3 N)
+        d position / d x [m per unit strain or radian].
+
+    """
+    lengths = np.diff(edges)
+    n = lengths.size
+    state = np.asarray(x, dtype=float).reshape(-1, 3)
+    theta, eps = state[:, 2], state[:, 0]
+    before = np.concatenate([[0.0], theta[:-1]])
+    sigma = np.clip(s[:, None] - edges[None, :-1], 0.0, lengths[None, :])
+    rho = sigma / lengths
+    turn = rho * (theta - before)                                    # (K, N)
+    sinc, dsinc = half_angle_sinc(turn, order=1)
+    angle = before + 0.5 * turn
+    along = np.stack([np.cos(angle), np.sin(angle)], axis=1)         # (K, 2, N)
+    normal = np.stack([-along[:, 1], along[:, 0]], axis=1)
+    reach = (1.0 + eps) * sigma                                      # (K, N)
+    chords = (reach * sinc)[:, None, :] * along
+    positions = chords.sum(axis=2)
+    jac = np.zeros((s.size, 2, n, 3))
+    jac[..., 0] = (sigma * sinc)[:, None, :] * along
+    arc = (reach * rho * dsinc)[:, None, :] * along
+    bend = (reach * sinc)[:, None, :] * normal
+    jac[..., 2] = arc + (0.5 * rho)[:, None, :] * bend
+    # theta_{i-1} is theta of the segment before (theta_0 = 0 is clamped).
+    jac[..., :-1, 2] += (-arc + (1.0 - 0.5 * rho)[:, None, :] * bend)[..., 1:]
+    return positions, jac.reshape(s.size, 2, -1)
+
+
+def positions_at(x, edges, s):
+    """
+    Midplane position of the PCC's material points at reference arc lengths `s` [m].
+
+    Exactly on its arcs (`material_jacobian`); a result's `position_at` is this function
+    of its own state and edges.
+
+    Parameters
+    ----------
+    x : ndarray, shape (3 N,)
+        Engine unknowns.
+    edges : ndarray, shape (N + 1,)
+        Segment edges [m].
+    s : float or array_like
+        Reference arc length from the clamp edge, in [0, L] [m].
+
+    Returns
+    -------
+    ndarray, shape s.shape + (2,)
+        Global (X, Z) [m].
+
+    References
+    ----------
+    docs/physics.md, section 13.
+
+    """
+    values, shape = arc_lengths('s', s, edges[-1])
+    return material_jacobian(x, edges, values)[0].reshape(shape + (2,))

@@ -1,17 +1,19 @@
 """Rung d: the geometrically exact, extensible rod, the ladder's reference."""
 
+import functools
 import math
 
 import numpy as np
 from scipy.linalg import eigh, lu_factor, lu_solve
 
-from .rung import check_common, RodResult, RungSolver, set_common
+from .rung import check_common, RungSolver, set_common
 from .. import engine
 from ..engine import linear_step, NewtonOptions
 from ..kernels import rod as rod_kernels
 from ..kernels.pcc_section import section_arrays
+from ..result import finger_constants
 from ..section.law import station_layout
-from ..validation import real_number
+from ..validation import arc_lengths, real_number
 
 __all__ = ['RodSolver']
 
@@ -161,7 +163,6 @@ class RodSolver(RungSolver):
 
     """
 
-    _result_type = RodResult
     rung = 'rod'
 
     def __init__(self, design, pressure_model=None, tol=1e-10, ribs='exact', degree=8,
@@ -215,6 +216,7 @@ class RodSolver(RungSolver):
                                             energy_scale=self._theta_scale)
         #: What the engine runs: the rod has no compiled data, so its own methods.
         self.engine_problem = self
+        self._constants = finger_constants(self.rung, self.n_segments, self.edges)
 
     def _sample_geometry(self):
         """Store where the output samples lie; it depends on the edges alone."""
@@ -240,10 +242,6 @@ class RodSolver(RungSolver):
         return (elem.astype(np.int64), np.ascontiguousarray(values),
                 np.ascontiguousarray(derivs), self._half[el.ravel()],
                 el.ravel().astype(np.int64), weights)
-
-    def _compatible(self, other):
-        return (isinstance(other, RodSolver) and other.degree == self.degree
-                and np.array_equal(other.edges, self.edges))
 
     def _flat_state(self):
         return (np.zeros(self.n_theta), np.zeros((self.n_elements, self._xq.size, 2)))
@@ -517,21 +515,43 @@ class RodSolver(RungSolver):
                                                          self._weights, element, weights)
         return th_s, kap_s, bs, nodes, points
 
-    def material_points(self, result, s):
+    def positions_at(self, x, pressure, force, s):
         """
-        (X, Z) [m] of the material points at reference arc lengths s (K,) of a result.
+        (X, Z) [m] of the material points at reference arc lengths s of a state.
 
         The start of s's element plus the integral of (1 + eps)(cos, sin) theta from there
         to s by the elements' Gauss rule (Q points), eps from the local equilibrium at
-        those points: the rod's own kinematics, equal to its nodes at element ends.
+        those points: the rod's own kinematics, equal to its nodes at element ends. A
+        result's `position_at` is this function of its own state and loads.
+
+        Parameters
+        ----------
+        x : ndarray
+            Engine unknowns.
+        pressure : float
+            [Pa].
+        force : (float, float)
+            Tip force [N].
+        s : float or array_like
+            Reference arc length from the clamp edge, in [0, L] [m].
+
+        Returns
+        -------
+        ndarray, shape s.shape + (2,)
+
         """
+        values, shape = arc_lengths('s', s, self.length)
         # The kernel ends every point set at the tip: the tip closes the query.
-        geometry = self._geometry(np.append(s, self.length))
-        force = np.ascontiguousarray(result.tip_force, dtype=float)
-        points = self._points(self._pack(result.state), geometry, result.pressure, force)[4]
-        return points[:-1]
+        geometry = self._geometry(np.append(values, self.length))
+        points = self._points(x, geometry, pressure, np.asarray(force, dtype=float))[4]
+        return points[:-1].reshape(shape + (2,))
+
+    def _positions(self, x, pressure, force):
+        """Return the `position_at` of a result at engine unknowns `x`."""
+        return functools.partial(self.positions_at, x, pressure, force)
 
     def _outputs(self, state, pressure, force):
+        """Return the output fields of a state, by name (`RungSolver._python_fields`)."""
         theta, _ = state
         x = self._pack(state)
         force = np.ascontiguousarray(force, dtype=float)

@@ -1,22 +1,21 @@
-"""What every rung beyond the CCM shares: its result type and its solve and rigidity."""
+"""What every rung beyond the CCM shares: its solve, rigidity and results."""
 
-import functools
 import math
 
 import numpy as np
 
-from .ccm import AXES, check_rigidity, pressure_work_factor, ResultPositions, rigidity_result
+from .ccm import AXES, check_rigidity, pressure_work_factor, rigidity_result
 from .. import engine
-from ..analysis import CircleFitted
 from ..design import ActuatorDesign
 from ..engine import SolverStatus
-from ..validation import check_load, check_pressure_model, warm_start_allowed
+from ..kernels.circle import circle_fit
+from ..result import finger_result, Result
+from ..validation import (check_load, check_outputs, check_pressure_model, OUTPUT_LEVELS,
+                          warm_start_allowed)
 
-__all__ = ['LadderResult', 'ArcResult', 'RodResult', 'RungSolver', 'check_common',
-           'set_common']
+__all__ = ['RungSolver', 'check_common', 'set_common']
 
 _MESSAGES = {
-    SolverStatus.SUCCESS: 'converged: last Newton step {step:.1e} <= {tol:.0e}',
     SolverStatus.MAX_ITERATIONS: 'not converged after {iterations} Newton iterations '
                                  '(last step {step:.1e})',
     SolverStatus.LINE_SEARCH_FAILED: 'line search found no decrease (last step {step:.1e}); '
@@ -27,101 +26,8 @@ _MESSAGES = {
     SolverStatus.CONTINUATION_FAILED: 'continuation in pressure and load stalled at '
                                       '{fraction:.1%} of the requested loading',
 }
-
-
-class LadderResult(ResultPositions, CircleFitted):
-    """
-    Equilibrium of one finger from a ladder rung, with the fields of `CCMResult`.
-
-    Attributes
-    ----------
-    success : bool
-        True only for a converged, stable equilibrium.
-    status : SolverStatus
-    message : str
-    iterations : int
-        Newton iterations, continuation steps included.
-    coefficients : ndarray, shape (N, 4) or None
-        Arc: the CCM coefficients (b1, b3, c1, d) of one segment with the same
-        uniform strain (b1 = eps, d = kappa/2, b3 = -2 d^2/3, SI). Rod: None
-        (it has no polynomial segments); see `strains`.
-    points : ndarray, shape (M, 2)
-        Global (X, Z) midplane samples at evenly spaced reference arc length,
-        the root first and the tip last [m].
-    tangent : ndarray, shape (M,)
-        Tangent angle theta of every sample from +X towards +Z [rad].
-    strains : ndarray, shape (M, 3)
-        (eps [-], kappa [1/m], c1 [-]) at every sample; kappa = d theta/d s per
-        reference length, the deformed curvature is kappa / (1 + eps).
-    tip : ndarray, shape (2,)
-        Global (X, Z) of the tip [m].
-    beta : ndarray, shape (N,)
-        Rotation of every element (arc: N = 1, the whole arc) [rad].
-    valid : bool
-        Always True: these rungs are geometrically exact and have no
-        small-rotation rule.
-    curvature, fit_rmsd : float
-        Signed curvature of the least-squares circle [1/m] and its RMSD [m].
-    pressure : float
-        Gauge pressure [Pa].
-    tip_force : tuple of float
-        (f0, p0) [N].
-    energy : float
-        Total potential [J].
-
-    """
-
-    def __init__(self, solver, state, status, iterations, step, pressure, tip_force,
-                 fraction=1.0):
-        self.solver = solver
-        self.state = state
-        self.status = SolverStatus(status)
-        self.success = self.status is SolverStatus.SUCCESS
-        self.iterations = int(iterations)
-        self.last_step = float(step)
-        self.pressure = float(pressure)
-        self.tip_force = (float(tip_force[0]), float(tip_force[1]))
-        self.valid = True
-        self._figures = (step, iterations, fraction)
-
-    @functools.cached_property
-    def message(self):
-        """What happened, with the figures behind `status`."""
-        step, iterations, fraction = self._figures
-        return _MESSAGES[self.status].format(step=step, tol=self.solver.tol,
-                                             iterations=iterations, fraction=fraction)
-
-    # The outputs are built on first use: a caller reading the tip pays for the samples only
-    # when it reads them.
-    @functools.cached_property
-    def _out(self):
-        return self.solver._outputs(self.state, self.pressure, np.array(self.tip_force))
-
-    points = property(lambda self: self._out['points'],
-                      doc='Global (X, Z) midplane samples, root first, tip last [m].')
-    tangent = property(lambda self: self._out['tangent'],
-                       doc='Tangent angle theta of every sample from +X towards +Z [rad].')
-    strains = property(lambda self: self._out['strains'],
-                       doc='(eps [-], kappa [1/m], c1 [-]) at every sample.')
-    tip = property(lambda self: self._out['tip'], doc='Global (X, Z) of the tip [m].')
-    beta = property(lambda self: self._out['beta'],
-                    doc='Rotation of every element [rad].')
-    coefficients = property(lambda self: self._out['coefficients'],
-                            doc='CCM coefficients (b1, b3, c1, d) of every segment, or None.')
-    nodes = property(lambda self: self._out['nodes'], doc='Segment ends [m].')
-    energy = property(lambda self: self._out['energy'], doc='Total potential [J].')
-
-    def __repr__(self):
-        return (f'{type(self).__name__}(success={self.success}, status={self.status.name}, '
-                f'iterations={self.iterations}, tip={self.tip.round(6).tolist()})')
-
-
-class ArcResult(LadderResult):
-    """Result of `ArcSolver`; `state` is (eps, kappa, c1)."""
-
-
-class RodResult(LadderResult):
-    """Result of `RodSolver`; `state` is (theta nodal values, (eps, c1) at quadrature points)."""
+#: The level of every result a rigidity builds for an interpreted rung (the rod).
+_ALL = OUTPUT_LEVELS['all']
 
 
 def check_common(design, pressure_model, samples):
@@ -148,13 +54,14 @@ class RungSolver:
     """
     Shared solve and rigidity of the non-CCM rungs: discretisations of the one engine.
 
-    A subclass provides `_pack`/`_unpack` between its state and the engine's flat
+    A subclass provides `_constants` (`result.finger_constants`, at its construction),
+    `_pack`/`_unpack` between its state and the engine's flat
     unknowns, `_flat_state`, `energy`, `derivatives`, `step`, `solve_linear`,
-    `node_jacobian`, `gradient_scale` and `_options`; the Newton loop, the warm-start
-    rule, continuation and displacement control are the engine's.
+    `node_jacobian`, `gradient_scale`, `_options`, `edges` and `_positions` (its result's
+    `position_at`), and a compiled `engine_problem` or `_outputs` (the output fields of a
+    state by name, for one run interpreted); the Newton loop, the warm-start rule,
+    continuation and displacement control are the engine's.
     """
-
-    _result_type = LadderResult
 
     @property
     def tip_node(self):
@@ -184,7 +91,21 @@ class RungSolver:
             force = force + np.asarray(value, dtype=float)
         return force
 
-    def solve(self, pressure=0.0, tip_force=(0.0, 0.0), initial=None):
+    def _warm_start(self, initial):
+        """Engine unknowns of a warm start: a result of the same discretisation, or None."""
+        if initial is None:
+            return None
+        if isinstance(initial, Result) and initial.rung == self.rung and (
+                initial.segment_edges is self.edges
+                or np.array_equal(initial.segment_edges, self.edges)):
+            x = initial.x
+            if x.shape == self.engine_problem.flat().shape:
+                return x
+        raise ValueError(f'`initial` must be None or a result of a {type(self).__name__} with '
+                         'the same discretisation')
+
+    def solve(self, pressure=0.0, tip_force=(0.0, 0.0), initial=None, *, outputs='all',
+              model_choice=None):
         """
         Find the equilibrium at a gauge pressure and tip load.
 
@@ -194,55 +115,100 @@ class RungSolver:
             Gauge pressure P >= 0 [Pa].
         tip_force : (float, float)
             (f0, p0), tip force along global X and Z [N].
-        initial : result of this solver, optional
-            Warm start: Newton starts there, and if that does not reach a stable
-            equilibrium the solve starts again from the flat, unstrained state as
-            with None. It changes the iteration count, never the answer; it is ignored
-            above `validation.UNIQUE_LOAD` of tip load.
+        initial : Result, optional
+            Warm start, a result of the same discretisation: Newton starts there, and if
+            that does not reach a stable equilibrium the solve starts again from the flat,
+            unstrained state as with None. It changes the iteration count, never the
+            answer; it is ignored above `validation.UNIQUE_LOAD` of tip load.
+        outputs : {'all', 'shape', 'tip'}
+            What the result holds besides the state, as `CCMSolver.solve`'s.
+        model_choice : ModelChoice, optional
+            The choice that picked this model, recorded in the result.
 
         Returns
         -------
-        LadderResult
-            `success` False (with a message) when Newton and continuation both fail.
+        Result
+            `result.FINGER_FIELDS`; `success` False (with a message) when Newton and
+            continuation both fail.
 
         """
+        level = check_outputs(outputs)
         pressure, force = check_load(pressure, tip_force, self.design.max_pressure)
-        force = np.array(force)
-        if initial is not None and not (isinstance(initial, self._result_type) and (
-                initial.solver is self or initial.solver._compatible(self))):
-            raise ValueError(f'`initial` must be None or a {self._result_type.__name__} of a '
-                             'solver with the same discretisation')
+        start = self._warm_start(initial)
         # Beyond UNIQUE_LOAD a warm start could pick another stable branch: start cold.
-        warm = initial is not None and warm_start_allowed(math.hypot(*force))
-        x0 = self._pack(initial.state) if warm else None
+        if start is not None and not warm_start_allowed(math.hypot(*force)):
+            start = None
         loads = self.tip_loads(force)
-        out = engine.solve(self.engine_problem, pressure, loads, self._options, x0)
-        return self._result(out.x, out.status, out.iterations, out.gradient, out.step,
-                            out.min_eig, out.fraction, pressure, loads, force)
+        outcome = engine.solve(self.engine_problem, pressure, loads, self._options, start, level)
+        return self._result(outcome, pressure, force, model_choice=model_choice, level=level)
 
-    def _result(self, x, status, iterations, gradient, step, min_eig, fraction, pressure, loads,
-                tip_force):
-        """Build the result of an engine solve (a single one or a batch's scene)."""
-        return self._result_type(self, self._unpack(x), status, iterations, step, pressure,
-                                 np.asarray(tip_force, dtype=float), fraction=fraction)
+    def _result(self, outcome, pressure, tip_force, point_loads=(), model_choice=None,
+                level=_ALL):
+        """Build the Result of an engine outcome and its fields (a solve, or a batch's scene)."""
+        tip_force = (float(tip_force[0]), float(tip_force[1]))
+        fields = outcome.fields
+        if fields is None:
+            fields = self._python_fields(outcome.x, pressure, tip_force, level)
+        if outcome.status is SolverStatus.SUCCESS:
+            message = f'converged: last Newton step {outcome.step:.1e} <= {self.tol:.0e}'
+        else:
+            message = _MESSAGES[outcome.status].format(step=outcome.step,
+                                                       iterations=outcome.iterations,
+                                                       fraction=outcome.fraction)
+        if outcome.fields is None:
+            outcome = outcome._replace(fields=fields)
+        return finger_result(outcome, message, pressure, tip_force, self._unpack(outcome.x),
+                             self._positions(outcome.x, pressure, tip_force), self._constants,
+                             (), model_choice)
 
-    def rigidity(self, pressure=0.0, axis='x', displacement=0.010, initial=None):
+    def _python_fields(self, x, pressure, force, level):
+        """
+        Return the `engine.Fields` of a state an outcome came without (run interpreted).
+
+        A compiled rung's (a test may run its loops interpreted) from its outputs hook; the
+        rod's from its `_outputs` (a dict).
+        """
+        force = np.asarray(force, dtype=float)
+        if isinstance(self.engine_problem, engine.CompiledProblem):
+            loads = [(self.tip_node, force[None])] if force.any() else []
+            return engine.outputs(self.engine_problem, np.asarray(x)[None], [pressure], loads,
+                                  level)[0]
+        if level < OUTPUT_LEVELS['shape']:
+            tip = np.asarray(self.node_jacobian(x, self.tip_node)[0], dtype=float)
+            return engine.Fields(tip, None, True, None, None, None, None, None, None, None,
+                                 None, None)
+        out = self._outputs(self._unpack(x), pressure, force)
+        tip = np.asarray(out['tip'], dtype=float)
+        curvature = rmsd = None
+        if level >= _ALL:
+            curvature, rmsd = (float(v) for v in circle_fit(
+                np.ascontiguousarray(out['points'], dtype=float))[:2])
+        beta = np.asarray(out['beta'], dtype=float)
+        coefficients = out['coefficients']
+        return engine.Fields(
+            tip, float(out['energy']), True, curvature, rmsd, out['nodes'], beta,
+            np.concatenate([[0.0], np.cumsum(beta[:-1])]),
+            coefficients, out['points'], out['tangent'], out['strains'])
+
+    def rigidity(self, pressure=0.0, axis='x', displacement=0.010, initial=None, *,
+                 outputs='tip'):
         """
         Flexural rigidity at fixed pressure by displacement control, eq. (22).
 
         The engine's bordered system finds the tip force along +X (or +Z) whose
-        equilibrium moves the tip by `displacement` along that axis.
+        equilibrium moves the tip by `displacement` along that axis; see
+        `CCMSolver.rigidity` for the parameters.
 
         Returns
         -------
-        RigidityResult
-            K_x = f0 |Z_tip|^3 / (3 delta) or K_z = p0 |X_tip|^3 / (3 delta) [N m^2].
+        Result
+            `ccm.RIGIDITY_FIELDS`: K_x = f0 |Z_tip|^3 / (3 delta) or K_z = p0 |X_tip|^3 /
+            (3 delta) [N m^2].
 
         """
+        level = check_outputs(outputs)
         delta = check_rigidity(axis, displacement)
-        unloaded = self.solve(pressure, (0.0, 0.0), initial=initial)
-        if not unloaded.success:
-            return rigidity_result(self, axis, delta, pressure, unloaded)
-        out = engine.rigidity(self.engine_problem, self._pack(unloaded.state), pressure,
-                              self.tip_node, AXES[axis], delta, self._options)
-        return rigidity_result(self, axis, delta, pressure, unloaded, out)
+        pressure = check_load(pressure, (0.0, 0.0), self.design.max_pressure)[0]
+        out = engine.rigidity(self.engine_problem, pressure, self.tip_node, AXES[axis], delta,
+                              self._options, self._warm_start(initial), level)
+        return rigidity_result(self, axis, delta, pressure, out, level)

@@ -5,7 +5,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from .solves import _compiled, _flat, _packed, _rigidity_entry, _solve_entry
+from .solves import _compiled, _flat, _packed, _rigidity_entry, _solve_entry, SOLVE, TIP
 from ..compiled import over_cores
 
 
@@ -25,6 +25,9 @@ class BatchOutcome:
         As in `NewtonOutcome`.
     tips : ndarray, shape (S, 2)
         Position of the tip node [m].
+    valid : ndarray of bool, shape (S,)
+    energy, curvature, fit_rmsd : ndarray, shape (S,)
+        NaN below the call's level (`solves.OUTPUTS`).
 
     """
 
@@ -36,6 +39,13 @@ class BatchOutcome:
     min_eig: np.ndarray
     fraction: np.ndarray
     tips: np.ndarray
+    valid: np.ndarray = None
+    energy: np.ndarray = None
+    curvature: np.ndarray = None
+    fit_rmsd: np.ndarray = None
+    #: The scenes' flat output rows and the sizes that cut them (`solves._fields`).
+    shapes: np.ndarray = None
+    sizes: np.ndarray = None
 
 
 @dataclass(frozen=True)
@@ -91,6 +101,19 @@ def _batch_inputs(problems, loaded, options):
     return numba.typed.List(datas), flat, opts, cap
 
 
+def batch_key(problem, options, loaded):
+    """
+    Return what scenes must share to be solved in one batch: a hashable key of a problem.
+
+    (data type, unknowns' shape, packed options, step cap) of `problem` under `options`,
+    loaded or not; `solve_batch` takes problems of one key.
+    """
+    data = _compiled(problem, loaded)
+    flat = _flat(problem)
+    opts, cap = _packed(problem, options, flat.shape)
+    return type(data), flat.shape, opts, cap.tobytes()
+
+
 def _index(design, pressures, count):
     design = np.ascontiguousarray(design, dtype=np.int64)
     pressures = np.ascontiguousarray(pressures, dtype=float)
@@ -102,11 +125,11 @@ def _index(design, pressures, count):
     return design, pressures
 
 
-def solve_batch(problems, design, pressures, nodes, forces, options, tip, initial=None):
+def solve_batch(problems, design, pressures, nodes, forces, options, initial=None, level=TIP):
     """
     Solves of S independent scenes in compiled loops over both cores (`over_cores`).
 
-    Scene i is `solve(problems[design[i]], pressures[i], loads_i, options, initial[i])`,
+    Scene i is `solve(problems[design[i]], pressures[i], loads_i, options, initial[i], level)`,
     loads_i being `forces[i]` at `nodes`: the same arithmetic, so the same answer.
 
     Parameters
@@ -122,10 +145,10 @@ def solve_batch(problems, design, pressures, nodes, forces, options, tip, initia
     forces : array_like, shape (S, K, 2)
         [N].
     options : NewtonOptions
-    tip : int
-        Node whose position is returned.
     initial : array_like, shape (S,) + unknowns, optional
         Warm starts [scaled units]; None: every scene from the flat state.
+    level : {TIP, SHAPE, ALL}
+        The outputs of every state (`solves.OUTPUTS`); TIP, the default, costs least.
 
     Returns
     -------
@@ -147,10 +170,13 @@ def solve_batch(problems, design, pressures, nodes, forces, options, tip, initia
 
     def run(lo, hi):
         return _solve_entry(datas, design[lo:hi], pressures[lo:hi], nodes, forces[lo:hi],
-                            initial[lo:hi] if warm else initial, flat, opts, cap, int(tip),
-                            False)
-    states, status, iterations, figures = over_cores(run, pressures.size)
-    return BatchOutcome(states, status, iterations, *figures[:, :4].T, figures[:, 4:])
+                            initial[lo:hi] if warm else initial, flat, opts, cap, SOLVE,
+                            int(level))
+    states, figures, shapes, sizes = over_cores(run, pressures.size)
+    return BatchOutcome(states, figures[:, 10].astype(np.int64),
+                        figures[:, 11].astype(np.int64), *figures[:, :4].T, figures[:, 4:6],
+                        figures[:, 7] == 1.0, *figures[:, [6, 8, 9]].T, shapes,
+                        sizes[:5] if sizes.size else sizes)
 
 
 def rigidity_batch(problems, design, pressures, node, direction, displacement, options):
@@ -185,11 +211,11 @@ def rigidity_batch(problems, design, pressures, node, direction, displacement, o
 
     def run(lo, hi):
         return _rigidity_entry(free, loaded, design[lo:hi], pressures[lo:hi], int(node),
-                               direction, float(displacement), cold, flat, opts, cap)
-    out = over_cores(run, pressures.size)
-    unloaded_x, status, states, iterations, figures = out
-    unloaded = BatchOutcome(unloaded_x, status, iterations[:, 0], *figures[:, :4].T,
-                            np.full((pressures.size, 2), np.nan))
-    force = np.where(figures[:, 10] == 1.0, figures[:, 4], np.nan)
-    return BatchRigidity(unloaded, states, force, iterations[:, 1], figures[:, 5],
-                         figures[:, 6] == 1.0, figures[:, 7], figures[:, 8:10])
+                               direction, float(displacement), cold, flat, opts, cap, TIP)
+    unloaded_x, states, figures, free_figures = over_cores(run, pressures.size)[:4]
+    unloaded = BatchOutcome(unloaded_x, free_figures[:, 10].astype(np.int64),
+                            free_figures[:, 11].astype(np.int64), *free_figures[:, :4].T,
+                            free_figures[:, 4:6], free_figures[:, 7] == 1.0)
+    force = np.where(figures[:, 6] == 1.0, figures[:, 0], np.nan)
+    return BatchRigidity(unloaded, states, force, figures[:, 7].astype(np.int64),
+                         figures[:, 1], figures[:, 2] == 1.0, figures[:, 3], figures[:, 4:6])

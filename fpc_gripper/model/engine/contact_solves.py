@@ -8,7 +8,7 @@ import numpy as np
 from .active_set import _contact, _GAP_TOL
 from .outcomes import _STATUS, SolverStatus
 from .problems import CompiledProblem
-from .solves import _compiled, _contact_entry, _flat, _own, _packed, solve
+from .solves import _compiled, _contact_entry, _flat, _own, _packed, solve, TIP
 from ..kernels import contact as ck
 from ..kernels.chain import load_arrays
 
@@ -147,7 +147,7 @@ def contact_solve(problem, pressure, loads, contact, options, initial=None, top=
         spent = warm.iterations
         con = con._replace(status=np.zeros(count, dtype=np.int64))
     # The free finger (the engine's own solve, compiled once for every use), then growth.
-    free = solve(problem, pressure, loads, options)
+    free = solve(problem, pressure, loads, options, level=TIP)
     spent += free.iterations
     lam = np.zeros((count, 2))
     if free.status not in (SolverStatus.SUCCESS, SolverStatus.UNSTABLE):
@@ -181,7 +181,7 @@ def _release(problem, data, pressure, top, loads, nodes, forces, con, opts, cap,
     or a step fails even at its smallest (then the caller grows the obstacles).
     """
     def depth(p):
-        out = solve(problem, p, loads, options)
+        out = solve(problem, p, loads, options, level=TIP)
         if out.status not in (SolverStatus.SUCCESS, SolverStatus.UNSTABLE):
             return math.inf, out
         return _free_depth(problem, out.x, con), out

@@ -33,9 +33,10 @@ def linear_solve(hess, rhs):
 # interpreted) or a `CompiledProblem` over namedtuples of arrays whose type is registered
 # here (`register`) with compiled functions of the same names taking the namedtuple first
 # (the loops then run compiled, for that type). These functions are that interface; the
-# loops call nothing else. The first five (`HOOKS`) serve every solve; the three `_point_*`
-# (`POINT_HOOKS`: face points, the PCC and the rod) serve contact only.
-HOOKS = ('derivatives', 'energy', 'step', 'solve_linear', 'node_jacobian')
+# loops call nothing else. The first six (`HOOKS`) serve every solve (`outputs`: the fields of
+# a state, `kernels.shapes.OUTPUT_FIELDS`); the three `_point_*` (`POINT_HOOKS`: face points,
+# the PCC and the rod) serve contact only.
+HOOKS = ('derivatives', 'energy', 'step', 'solve_linear', 'node_jacobian', 'outputs')
 POINT_HOOKS = ('point_derivatives', 'point_jacobian', 'point_positions')
 _REGISTERED = {}
 
@@ -103,6 +104,11 @@ def _node_jacobian(problem, x, node):
     return problem.node_jacobian(x, node)
 
 
+def _outputs(problem, x, pressure, nodes, forces, samples):
+    """Return the fields of a state, `kernels.shapes.OUTPUT_FIELDS` (samples where asked)."""
+    return problem.outputs(x, pressure, _loads(nodes, forces), samples)
+
+
 def _point_derivatives(problem, x, pressure, nodes, forces, pseg, poff, pz, pforce):
     """Return `_derivatives` with dead forces pforce (K, 2) at face points too."""
     return problem.point_derivatives(x, pressure, _loads(nodes, forces), pseg, poff, pz,
@@ -165,6 +171,15 @@ def _node_jacobian_compiled(problem, x, node):
     kernel = _kernel(problem, 'node_jacobian')
     if kernel is not None:
         return lambda problem, x, node: kernel(problem, x, node)
+    return None
+
+
+@overload(_outputs, jit_options={'nogil': True})
+def _outputs_compiled(problem, x, pressure, nodes, forces, samples):
+    kernel = _kernel(problem, 'outputs')
+    if kernel is not None:
+        return lambda problem, x, pressure, nodes, forces, samples: kernel(
+            problem, x, pressure, nodes, forces, samples)
     return None
 
 

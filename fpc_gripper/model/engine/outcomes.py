@@ -81,6 +81,31 @@ class NewtonOutcome(typing.NamedTuple):
     step: float
     min_eig: float = math.nan
     fraction: float = 1.0
+    #: The state's outputs (`Fields`), computed with it; None where the problem runs
+    #: interpreted (its own code computes them) or none were asked for.
+    fields: object = None
+
+
+class Fields(typing.NamedTuple):
+    """
+    The outputs of a state, computed with it in one compiled call (internal: results).
+
+    Below the call's level (`solves.OUTPUTS`) the fields it does not reach are None, as
+    coefficients and strains are where the discretisation has none.
+    """
+
+    tip: np.ndarray
+    energy: object
+    valid: bool
+    curvature: object
+    fit_rmsd: object
+    nodes: object
+    beta: object
+    theta: object
+    coefficients: object
+    points: object
+    tangent: object
+    strains: object
 
 
 #: SolverStatus by code, without the enum's own lookup on every solve.
@@ -100,3 +125,7 @@ class BorderedOutcome:
     gradient: float
     #: Position of the loaded node in the loaded state [m], shape (2,).
     tip: np.ndarray
+    #: The unloaded solve it started from (`engine.rigidity` makes it).
+    unloaded: NewtonOutcome = None
+    #: The loaded state's outputs under the found force, as `NewtonOutcome.fields`.
+    fields: object = None

@@ -1,104 +1,182 @@
 """The engine's front: its compiled entries, and Newton, solve, rigidity and sensitivity."""
 
+import math
 import threading
 import weakref
 
 import numba
+from numba.extending import register_jitable
 import numpy as np
 
 from .active_set import _contact
 from .bordered import _rigidity
-from .newton import _derivatives, _newton, _node_jacobian, _solve, _solve_linear
-from .outcomes import _STATUS, _SUCCESS, BorderedOutcome, NewtonOutcome
+from .newton import _derivatives, _newton, _node_jacobian, _outputs, _solve, _solve_linear
+from .outcomes import (_STATUS, _SUCCESS, BorderedOutcome, Fields, NewtonOptions,
+                       NewtonOutcome, SolverStatus)
 from .problems import CompiledProblem
 from ..compiled import jit
 from ..kernels.chain import load_arrays
+from ..kernels.circle import circle_fit
 
 
 # -- the compiled entries: what Python calls, S scenes each (a single call is one scene) -----
-@jit
-def _solve_entry(problems, design, pressures, nodes, forces, initial, flat, options, cap, tip,
-                 newton_only):
-    """
-    Solve scene i by `_solve` on ``problems[design[i]]``, or by `_newton` alone.
+#: What a call computes besides the states, in the order each adds (`OUTPUTS` names them):
+#: the tip and validity; then the chain (nodes, rotations, coefficients), the energy and the
+#: samples; then the samples' circle fit.
+TIP, SHAPE, ALL = 0, 1, 2
+OUTPUTS = ('tip', 'shape', 'all')
+#: What the solve entry does with each scene: solve it (warm, cold, continuation), run Newton
+#: alone from `initial`, or take `initial` as the state and compute its outputs only.
+SOLVE, NEWTON, GIVEN = 0, 1, 2
+#: Columns of the entries' per-scene `figures`.
+FIGURES = ('gradient', 'step', 'min_eig', 'fraction', 'tip_x', 'tip_z', 'energy', 'valid',
+           'curvature', 'fit_rmsd', 'status', 'iterations')
 
-    `_newton` runs from ``initial[i]`` where `newton_only`; the tip's position is returned
-    where ``tip >= 0``.
+
+@register_jitable
+def _put_outputs(i, out, level, figures, shapes):
+    """
+    Store scene i's `_outputs`: tip and validity in its figures; from SHAPE its arrays.
+
+    The arrays go flat into row i of `shapes` (allocated with the first scene's
+    `_output_sizes` when i is 0): nodes, beta, theta, coefficients, points, tangent,
+    strains; the energy and, from ALL, the circle fit of the points into its figures.
+    """
+    tip = out[0].shape[0] - 1
+    figures[i, 4] = out[0][tip, 0]
+    figures[i, 5] = out[0][tip, 1]
+    figures[i, 7] = 1.0 if out[4] else 0.0
+    if level < SHAPE:
+        return
+    figures[i, 6] = out[5]
+    k = 0
+    for part in (out[0].ravel(), out[1], out[2], out[3].ravel(), out[6].ravel(), out[7],
+                 out[8].ravel()):
+        for value in part:
+            shapes[i, k] = value
+            k += 1
+    if level >= ALL and out[6].shape[0] >= 3:
+        figures[i, 8], figures[i, 9], _, _ = circle_fit(out[6])
+
+
+@register_jitable
+def _output_sizes(out):
+    """(nodes, segments, coefficient rows, samples, strain rows) of one scene's `_outputs`."""
+    return np.array([out[0].shape[0], out[1].size, out[3].shape[0], out[6].shape[0],
+                     out[8].shape[0]])
+
+
+@register_jitable
+def _new_shapes(count, sizes, level):
+    """Return flat output rows for `count` scenes of these `_output_sizes` (none below SHAPE)."""
+    if level < SHAPE:
+        return np.empty((0, 0))
+    width = 2 * sizes[0] + 2 * sizes[1] + 4 * sizes[2] + 3 * sizes[3] + 3 * sizes[4]
+    return np.empty((count, width))
+
+
+@jit
+def _solve_entry(problems, design, pressures, nodes, forces, initial, flat, options, cap, mode,
+                 level):
+    """
+    Solve scene i on ``problems[design[i]]`` as `mode` says; its outputs to `level`.
+
+    Returns the states, their `FIGURES` (S, 12), the flat output rows (`_put_outputs`; no
+    rows below SHAPE) and the `_output_sizes` that cut a row into its arrays.
     """
     count = pressures.size
     warm = initial.shape[0] > 0
     states = np.empty((count,) + flat.shape)
-    status = np.empty(count, dtype=np.int64)
-    iterations = np.empty(count, dtype=np.int64)
-    figures = np.full((count, 6), np.nan)
+    figures = np.full((count, 12), np.nan)
+    sizes = np.zeros(5, dtype=np.int64)
+    shapes = np.empty((0, 0))
     for i in range(count):
         problem = problems[design[i]]
         start = initial[i] if warm else flat
-        if newton_only:
-            x, code, its, grad, step, eig = _newton(problem, start, pressures[i], nodes,
-                                                    forces[i], options, cap)
-            fraction = 1.0
+        code, its = _SUCCESS, 0
+        if mode == GIVEN:
+            x = start
+        elif mode == NEWTON:
+            x, code, its, figures[i, 0], figures[i, 1], figures[i, 2] = _newton(
+                problem, start, pressures[i], nodes, forces[i], options, cap)
+            figures[i, 3] = 1.0
         else:
-            x, code, its, grad, step, eig, fraction = _solve(
+            x, code, its, figures[i, 0], figures[i, 1], figures[i, 2], figures[i, 3] = _solve(
                 problem, start, warm, flat, pressures[i], nodes, forces[i], options, cap)
         states[i] = x
-        status[i] = code
-        iterations[i] = its
-        figures[i, 0] = grad
-        figures[i, 1] = step
-        figures[i, 2] = eig
-        figures[i, 3] = fraction
-        if tip >= 0:
-            position = _node_jacobian(problem, x, tip)[0]
-            figures[i, 4] = position[0]
-            figures[i, 5] = position[1]
-    return states, status, iterations, figures
+        figures[i, 10] = code
+        figures[i, 11] = its
+        out = _outputs(problem, x, pressures[i], nodes, forces[i], level >= SHAPE)
+        if i == 0:
+            sizes = _output_sizes(out)
+            shapes = _new_shapes(count, sizes, level)
+        _put_outputs(i, out, level, figures, shapes)
+    return states, figures, shapes, sizes
 
 
 @jit
 def _rigidity_entry(unloaded, loaded, design, pressures, node, direction, displacement,
-                    initial, flat, options, cap):
-    """Run `_rigidity` of scene i from ``initial[i]``, or from a cold unloaded `_solve`."""
+                    initial, flat, options, cap, level):
+    """
+    Scene i: the unloaded `_solve` (warm from ``initial[i]`` if given), then `_rigidity`.
+
+    Returns the unloaded and the loaded states; figures (S, 9) of the displacement control
+    (force, fraction, stable, gradient, the loaded node's (X, Z), found, iterations, and
+    the unloaded solve's iterations); and the `FIGURES`, flat output rows and sizes of
+    the unloaded state and of the loaded one (under the found force at `node`), as
+    `_solve_entry`'s, to `level`.
+    """
     count = pressures.size
-    given = initial.shape[0] > 0
+    warm = initial.shape[0] > 0
     free = np.empty((count,) + flat.shape)
     states = np.empty((count,) + flat.shape)
-    status = np.empty(count, dtype=np.int64)
-    iterations = np.zeros((count, 2), dtype=np.int64)
-    figures = np.full((count, 11), np.nan)
-    nodes = np.zeros(0, dtype=np.int64)
-    forces = np.zeros((0, 2))
+    figures = np.full((count, 9), np.nan)
+    free_figures = np.full((count, 12), np.nan)
+    loaded_figures = np.full((count, 12), np.nan)
+    sizes = np.zeros(5, dtype=np.int64)
+    free_shapes = np.empty((0, 0))
+    loaded_shapes = np.empty((0, 0))
+    no_nodes = np.zeros(0, dtype=np.int64)
+    no_forces = np.zeros((0, 2))
+    tip_nodes = np.full(1, node, dtype=np.int64)
+    tip_forces = np.zeros((1, 2))
     for i in range(count):
         d = design[i]
-        if given:
-            x = initial[i]
-            code = _SUCCESS
-        else:
-            x, code, its, grad, step, eig, fraction = _solve(
-                unloaded[d], flat, False, flat, pressures[i], nodes, forces, options, cap)
-            iterations[i, 0] = its
-            figures[i, 0] = grad
-            figures[i, 1] = step
-            figures[i, 2] = eig
-            figures[i, 3] = fraction
+        x, code, its, free_figures[i, 0], free_figures[i, 1], free_figures[i, 2], \
+            free_figures[i, 3] = _solve(unloaded[d], initial[i] if warm else flat, warm, flat,
+                                        pressures[i], no_nodes, no_forces, options, cap)
+        free_figures[i, 10] = code
+        free_figures[i, 11] = its
+        figures[i, 8] = its
         free[i] = x
-        status[i] = code
         states[i] = x
+        out = _outputs(unloaded[d], x, pressures[i], no_nodes, no_forces, level >= SHAPE)
+        if i == 0:
+            sizes = _output_sizes(out)
+            free_shapes = _new_shapes(count, sizes, level)
+            loaded_shapes = _new_shapes(count, sizes, level)
+        _put_outputs(i, out, level, free_figures, free_shapes)
         if code != _SUCCESS:
+            _put_outputs(i, out, level, loaded_figures, loaded_shapes)
             continue
         y, force, ok, its, done, stable, gradient = _rigidity(
             loaded[d], x, pressures[i], node, direction, displacement, options, cap)
         position = _node_jacobian(loaded[d], y, node)[0]
         states[i] = y
-        iterations[i, 1] = its
-        figures[i, 4] = force
-        figures[i, 5] = done
-        figures[i, 6] = 1.0 if stable else 0.0
-        figures[i, 7] = gradient
-        figures[i, 8] = position[0]
-        figures[i, 9] = position[1]
-        figures[i, 10] = 1.0 if ok else 0.0
-    return free, status, states, iterations, figures
+        figures[i, 0] = force
+        figures[i, 1] = done
+        figures[i, 2] = 1.0 if stable else 0.0
+        figures[i, 3] = gradient
+        figures[i, 4] = position[0]
+        figures[i, 5] = position[1]
+        figures[i, 6] = 1.0 if ok else 0.0
+        figures[i, 7] = its
+        tip_forces[0, 0] = force * direction[0]
+        tip_forces[0, 1] = force * direction[1]
+        out = _outputs(loaded[d], y, pressures[i], tip_nodes, tip_forces, level >= SHAPE)
+        _put_outputs(i, out, level, loaded_figures, loaded_shapes)
+    return free, states, figures, free_figures, free_shapes, loaded_figures, loaded_shapes, \
+        sizes
 
 
 # numpy's error model (a division by zero gives inf or nan, which the loops test for) keeps
@@ -129,6 +207,8 @@ def _one(problem, loaded):
     return hit
 
 
+#: The options of a GIVEN call, which runs no Newton (any options of the right types).
+_GIVEN_OPTIONS = NewtonOptions()
 #: The design index of a one-scene call (read only by the entries).
 _SCENE = np.zeros(1, dtype=np.int64)
 
@@ -209,12 +289,38 @@ def _no_start(problem, flat):
     return memo['none']
 
 
-def _scene(out):
-    """Return the `NewtonOutcome` of a one-scene `_solve_entry`."""
-    states, status, iterations, figures = out
-    grad, step, eig, fraction = figures[0, :4].tolist()
-    return NewtonOutcome(states[0], _STATUS[status.item()], iterations.item(), grad, step, eig,
-                         fraction)
+def _scene(out, k=0, level=None):
+    """Return the `NewtonOutcome` of scene k of a `_solve_entry` call (fields to `level`)."""
+    states, figures = out[:2]
+    grad, step, eig, fraction, *_, code, its = row = figures[k].tolist()
+    return NewtonOutcome(states[k], _STATUS[int(code)], int(its), grad, step, eig, fraction,
+                         None if level is None else _fields(row, out[2], k, out[3], level))
+
+
+def _fields(figures, shapes, k, sizes, level):
+    """
+    Return the `Fields` of scene k: its `FIGURES` row (a list), and its row of `shapes`.
+
+    `sizes` are the entry's `_output_sizes`; the arrays are views of the row.
+    """
+    tip, valid = np.array(figures[4:6]), figures[7] == 1.0
+    if level < SHAPE:
+        return Fields(tip, None, valid, None, None, None, None, None, None, None, None, None)
+    energy, _, curvature, rmsd = figures[6:10]
+    n_nodes, n, rows, m, strain_rows = sizes.tolist()
+    row = shapes[k]
+    a = 2 * n_nodes
+    b = a + n
+    c = b + n
+    d = c + 4 * rows
+    e = d + 2 * m
+    f = e + m
+    fit = level >= ALL
+    return Fields(tip, energy, valid, curvature if fit else None, rmsd if fit else None,
+                  row[:a].reshape(n_nodes, 2), row[a:b], row[b:c],
+                  row[c:d].reshape(rows, 4) if rows else None, row[d:e].reshape(m, 2),
+                  row[e:f], row[f:f + 3 * strain_rows].reshape(strain_rows, 3)
+                  if strain_rows else None)
 
 
 def _outcome(out, problem, fraction=1.0):
@@ -264,10 +370,10 @@ def newton(problem, x, pressure, loads, options):
     if datas is None:
         return _outcome(_newton(problem, x, pressure, nodes, forces, opts, cap), problem)
     return _scene(_solve_entry(datas, _SCENE, np.array((float(pressure),)), nodes, forces[None],
-                               x[None], x, opts, cap, -1, True))
+                               x[None], x, opts, cap, NEWTON, TIP))
 
 
-def solve(problem, pressure, loads, options, initial=None):
+def solve(problem, pressure, loads, options, initial=None, level=ALL):
     """
     Equilibrium at a pressure and loads: warm start, else Newton from flat, else continuation.
 
@@ -289,12 +395,15 @@ def solve(problem, pressure, loads, options, initial=None):
     options : NewtonOptions
     initial : ndarray, optional
         Warm start [scaled units].
+    level : {TIP, SHAPE, ALL}
+        The outputs computed with the state, in the same compiled call (`OUTPUTS`).
 
     Returns
     -------
     NewtonOutcome
         `iterations` counts every Newton iteration spent; CONTINUATION_FAILED carries the
-        fraction of the loading reached.
+        fraction of the loading reached. Its `fields` are the state's outputs to `level`;
+        None for a problem run interpreted, whose own code computes them.
 
     """
     _, flat, opts, cap, datas, none = _frame(problem, options, bool(loads))
@@ -304,15 +413,52 @@ def solve(problem, pressure, loads, options, initial=None):
     if datas is None:
         return _outcome(_solve(problem, start, warm, flat, pressure, nodes, forces, opts, cap),
                         problem)
-    return _scene(_solve_entry(datas, _SCENE, np.array((float(pressure),)), nodes, forces[None],
-                               start[None] if warm else none, flat, opts, cap, -1, False))
+    out = _solve_entry(datas, _SCENE, np.array((float(pressure),)), nodes, forces[None],
+                       start[None] if warm else none, flat, opts, cap, SOLVE, level)
+    return _scene(out, 0, level)
 
 
-def rigidity(problem, unloaded_x, pressure, node, direction, displacement, options):
+def outputs(problem, states, pressures, loads, level=ALL):
+    """
+    Compute the outputs of given states of a compiled problem, as `solve` does with its own.
+
+    Parameters
+    ----------
+    problem : CompiledProblem
+    states : ndarray, shape (S,) + unknowns
+    pressures : sequence of float
+        [Pa], one per state.
+    loads : sequence of (int, ndarray (S, 2))
+        Node index and each state's force there [N].
+    level : {TIP, SHAPE, ALL}
+
+    Returns
+    -------
+    list of Fields
+
+    """
+    states = np.ascontiguousarray(states, dtype=float)
+    loaded = bool(loads)
+    flat = _flat(problem)
+    opts, cap = _packed(problem, _GIVEN_OPTIONS, flat.shape)
+    count = states.shape[0]
+    nodes = np.array([node for node, _ in loads], dtype=np.int64)
+    forces = np.zeros((count, len(loads), 2))
+    for j, (_, force) in enumerate(loads):
+        forces[:, j] = force
+    out = _solve_entry(_one(problem, loaded), np.zeros(count, dtype=np.int64),
+                       np.asarray(pressures, dtype=float), nodes, forces, states, flat, opts, cap,
+                       GIVEN, level)
+    return [_fields(out[1][k].tolist(), out[2], k, out[3], level) for k in range(count)]
+
+
+def rigidity(problem, pressure, node, direction, displacement, options, initial=None,
+             level=TIP):
     """
     Displacement control: the force along `direction` that moves node `node` by `displacement`.
 
-    A bordered Newton system in (x, f), the force magnitude being the Lagrange
+    First the unloaded equilibrium, as `solve` finds it (from `initial` as a warm start);
+    then a bordered Newton system in (x, f), the force magnitude being the Lagrange
     multiplier of e . O_node = e . O_node(unloaded) + delta, marched in fractions of the
     displacement (whole first, halved on failure down to 1/64).
 
@@ -321,8 +467,6 @@ def rigidity(problem, unloaded_x, pressure, node, direction, displacement, optio
     problem : CompiledProblem or discretisation
         See `newton`; also ``node_jacobian(x, node) -> (position (2,), d position/dx)``
         and ``solve_linear(hessian, rhs)`` (raises LinAlgError when singular).
-    unloaded_x : ndarray
-        Converged unloaded state.
     pressure : float
         [Pa].
     node : int
@@ -332,35 +476,63 @@ def rigidity(problem, unloaded_x, pressure, node, direction, displacement, optio
     displacement : float
         delta [m].
     options : NewtonOptions
+    initial : ndarray, optional
+        Warm start of the unloaded solve [scaled units].
+    level : {TIP, SHAPE, ALL}
+        The outputs of both states, as `solve`'s.
 
     Returns
     -------
     BorderedOutcome
+        The loaded state, with its `unloaded` solve; `fields` (and the unloaded one's) to
+        `level`, None for a problem run interpreted. Where the unloaded solve failed:
+        success False, the unloaded state, and NaN force and tip.
 
     References
     ----------
     Zhou, Headings, Dapino (2022), eq. (22); docs/physics.md, section 10.
 
     """
-    x = np.ascontiguousarray(unloaded_x, dtype=float)
     direction = np.ascontiguousarray(direction, dtype=float)
-    opts, cap = _packed(problem, options, x.shape)
-    loaded = _one(problem, True)
-    if loaded is None:
-        out = _rigidity(problem, x, pressure, int(node), direction, float(displacement), opts,
-                        cap)
+    _, flat, opts, cap, free, none = _frame(problem, options, False)
+    warm = initial is not None
+    start = np.ascontiguousarray(initial, dtype=float) if warm else flat
+    if free is None:
+        no_nodes, no_forces = load_arrays([])
+        unloaded = _outcome(_solve(problem, start, warm, flat, pressure, no_nodes, no_forces,
+                                   opts, cap), problem)
+        if unloaded.status is not SolverStatus.SUCCESS:
+            return _not_loaded(unloaded)
+        out = _rigidity(problem, unloaded.x, pressure, int(node), direction,
+                        float(displacement), opts, cap)
         tip = np.asarray(_node_jacobian(problem, out[0], int(node))[0], dtype=float)
-    else:
-        _, _, states, its, figures = _rigidity_entry(
-            _one(problem, False), loaded, _SCENE, np.array((float(pressure),)), int(node),
-            direction, float(displacement), x[None], x, opts, cap)
-        tip = figures[0, 8:10]
-        figure = figures[0].tolist()
-        out = (states[0], figure[4], figure[10] == 1.0, its[0, 1], figure[5], figure[6] == 1.0,
-               figure[7])
+        return _bordered(out, tip, unloaded)
+    out = _rigidity_entry(free, _one(problem, True), _SCENE, np.array((float(pressure),)),
+                          int(node), direction, float(displacement),
+                          start[None] if warm else none, flat, opts, cap, level)
+    unloaded_x, states, figures, free_figures, free_shapes, loaded_figures, loaded_shapes, \
+        sizes = out
+    grad, step, eig, fraction, *_, code, its = row = free_figures[0].tolist()
+    unloaded = NewtonOutcome(unloaded_x[0], _STATUS[int(code)], int(its), grad, step, eig,
+                             fraction, _fields(row, free_shapes, 0, sizes, level))
+    if unloaded.status is not SolverStatus.SUCCESS:
+        return _not_loaded(unloaded)
+    force, done, stable, gradient, tip_x, tip_z, found, its, _ = figures[0].tolist()
+    return _bordered((states[0], force, found == 1.0, its, done, stable == 1.0, gradient),
+                     np.array((tip_x, tip_z)), unloaded,
+                     _fields(loaded_figures[0].tolist(), loaded_shapes, 0, sizes, level))
+
+
+def _not_loaded(unloaded):
+    """Return the outcome of a rigidity whose unloaded solve failed."""
+    return BorderedOutcome(unloaded.x, math.nan, False, 0, 0.0, False, math.nan,
+                           np.full(2, np.nan), unloaded)
+
+
+def _bordered(out, tip, unloaded=None, fields=None):
     x, force, success, iterations, fraction, stable, gradient = out
     return BorderedOutcome(x, float(force), bool(success), int(iterations), float(fraction),
-                           bool(stable), float(gradient), tip)
+                           bool(stable), float(gradient), tip, unloaded, fields)
 
 
 def sensitivity(problem, x, pressure, loads, rates, control=None):

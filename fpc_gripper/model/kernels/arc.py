@@ -17,11 +17,11 @@ _jit = jit
 _FLOOR = 1e-10
 
 #: The arc as `engine` runs it compiled: its one-type section law (`section_arrays`), k_p,
-#: the free length L [m], the scale (1, L, 1) of the unknowns (eps, kappa L, c1) and the
-#: Gauss rule (t_q, w_q) on [0, 1] of the arc integrals.
+#: the free length L [m], the scale (1, L, 1) of the unknowns (eps, kappa L, c1), the
+#: Gauss rule (t_q, w_q) on [0, 1] of the arc integrals and the number of output samples.
 ArcData = collections.namedtuple('ArcData', ('stiffness', 'gas', 'pemc',
                                              'pressure_coefficient', 'length', 'scale',
-                                             'arc_t', 'arc_w'))
+                                             'arc_t', 'arc_w', 'samples'))
 
 
 @_jit

@@ -162,7 +162,6 @@ def segment_derivatives_kernel(q, stiffness, gas_volume, gas_moments, pemc_basis
     y = np.empty(4)
     g_y = np.empty(4)
     h_y = np.empty((4, 4))
-    pemc = np.empty(10)
     # d(A, B', D', C)/dq: constant but for dB'/dq3 = 4 q3.
     jac = np.zeros((4, 4))
     jac[0, 0] = 1.0
@@ -172,18 +171,25 @@ def segment_derivatives_kernel(q, stiffness, gas_volume, gas_moments, pemc_basis
     m = np.empty((4, 4))
     for i in range(n):
         _strain_unknowns(q, i, y)
-        pemc[:] = 0.0
+        # The products' sums in scalars, which stay in registers over the quadrature loop.
+        p0 = p1 = p2 = p3 = p4 = p5 = p6 = p7 = p8 = p9 = 0.0
         for p in range(points):
             s = _pemc_strain(pemc_basis, i, p, y, prestrain)
             density = _horner5(law, 0, s)
             stress = _horner5(law, 1, s)
             tangent = _horner5(law, 2, s)
             # The (1, phi_a, phi_a phi_b) products take F, sigma and sigma' (_PRODUCT_LAW).
-            pemc[0] += density * pemc_products[i, p, 0]
-            for c in range(1, 4):
-                pemc[c] += stress * pemc_products[i, p, c]
-            for c in range(4, 10):
-                pemc[c] += tangent * pemc_products[i, p, c]
+            p0 += density * pemc_products[i, p, 0]
+            p1 += stress * pemc_products[i, p, 1]
+            p2 += stress * pemc_products[i, p, 2]
+            p3 += stress * pemc_products[i, p, 3]
+            p4 += tangent * pemc_products[i, p, 4]
+            p5 += tangent * pemc_products[i, p, 5]
+            p6 += tangent * pemc_products[i, p, 6]
+            p7 += tangent * pemc_products[i, p, 7]
+            p8 += tangent * pemc_products[i, p, 8]
+            p9 += tangent * pemc_products[i, p, 9]
+        pemc = (p0, p1, p2, p3, p4, p5, p6, p7, p8, p9)
         quadratic = 0.0
         for a in range(4):
             ky = 0.0
@@ -266,12 +272,13 @@ def segment_derivatives(q, seg, prestrain, emc, pressure_work):
 #: compiles once for the CCM. The Hessian is (blocks or (1, 4N, 4N), factor, definite).
 CCMData = collections.namedtuple('CCMData', (
     'stiffness', 'gas_volume', 'gas_moments', 'pemc_basis', 'pemc_weights', 'pemc_products',
-    'prestrain', 'law', 'pressure_coefficient', 'lengths', 'consistent', 'dense'))
+    'prestrain', 'law', 'pressure_coefficient', 'lengths', 'consistent', 'dense',
+    'per_segment'))
 #: The factor slot of a block Hessian, which has none.
 _NO_FACTOR = np.zeros((0, 0))
 
 
-def ccm_data(seg, prestrain, emc, pressure_coefficient, consistent, loaded):
+def ccm_data(seg, prestrain, emc, pressure_coefficient, consistent, loaded, per_segment=16):
     """
     Return the CCM as the engine's compiled discretisation (`CCMData`, dense if loaded).
 
@@ -287,11 +294,14 @@ def ccm_data(seg, prestrain, emc, pressure_coefficient, consistent, loaded):
     consistent : bool
         The 'consistent' reconstruction (`consistent_strain_map`) instead of the paper's.
     loaded : bool
+    per_segment : int
+        Midplane samples m per segment of the outputs.
 
     """
     return CCMData(seg.stiffness, seg.gas_volume, seg.gas_moments, seg.pemc_basis,
                    seg.pemc_weights, seg.pemc_products, float(prestrain), _law_matrix(emc),
-                   float(pressure_coefficient), seg.lengths, bool(consistent), bool(loaded))
+                   float(pressure_coefficient), seg.lengths, bool(consistent), bool(loaded),
+                   int(per_segment))
 
 
 @_jit

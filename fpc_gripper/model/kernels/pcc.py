@@ -466,11 +466,12 @@ def point_derivatives_kernel(x, lengths, stiffness, gas, pemc, work, load_nodes,
 
 
 # -- the engine's discretisation: the PCC rod as a namedtuple of arrays -----------------------
-#: The PCC rod as `engine` runs it compiled: `section_arrays`, the segment lengths [m], k_p
-#: and the gradient scale [J]. Its Hessian is (lower, factor, step, definite) of
-#: `derivatives_kernel`.
+#: The PCC rod as `engine` runs it compiled: `section_arrays`, the segment lengths [m], k_p,
+#: the gradient scale [J], and the segment (int64) and offset into it [m] of every output
+#: sample. Its Hessian is (lower, factor, step, definite) of `derivatives_kernel`.
 PCCData = collections.namedtuple('PCCData', ('lengths', 'stiffness', 'gas', 'pemc',
-                                             'pressure_coefficient', 'gradient_scale'))
+                                             'pressure_coefficient', 'gradient_scale',
+                                             'sample_segment', 'sample_offset'))
 
 
 @_jit

@@ -1,427 +1,43 @@
-"""Compiled (numba) shape outputs: the PCC's fields, CCM midplane samples, the circle fit."""
+"""Compiled (numba) outputs of a state: each discretisation's `outputs` hook, one shape."""
 
 import math
 
 import numpy as np
 
-from . import arc as arc_kernels, chain
+from . import chain
+from .arc import arc_energy, arc_node_jacobian
+from .ccm import ccm_energy
 from .pcc import energy_kernel, nodes_kernel
 from .pcc_section import _sinc0
 from ..compiled import jit
 
-__all__ = ['signed_distances', 'distance_jacobian', 'circle_fit', 'outputs_kernel',
-           'ccm_samples', 'ccm_circles', 'pcc_circles']
+__all__ = ['ccm_outputs', 'pcc_outputs', 'arc_outputs', 'OUTPUT_FIELDS']
 
 # Built at install (`compiled`), once per argument types; nogil lets a caller thread them.
 _jit = jit
-#: Pratt's normalisation B^2 + C^2 - 4 A D = 1 as a quadratic form in (A, B, C, D).
-_PRATT = np.array([[0.0, 0.0, 0.0, -2.0],
-                   [0.0, 1.0, 0.0, 0.0],
-                   [0.0, 0.0, 1.0, 0.0],
-                   [-2.0, 0.0, 0.0, 0.0]])
-#: Levenberg-Marquardt: largest iteration count, and the step (in the scaled parameters
-#: (A, D, phi), all of order one after centring and scaling) below which it has converged
-#: (Gauss-Newton contracts by about the relative residual, 1e-4 for a finger, per step, so
-#: the state is then within round-off of the minimum).
-_LM_ITERATIONS = 200
-_LM_XTOL = 1e-12
-_GAUSS_NEWTON = 1e-8
+#: What every `outputs` hook returns, in order. nodes (N + 1, 2) [m], the tip last; beta (N,)
+#: and theta (N,), every segment's rotation and its angle at its start [rad]; coefficients
+#: (N, 4) (b1 [-], b3 [1/m^2], c1 [-], d [1/m]), or (0, 4) where the discretisation has
+#: none; valid (the CCM's small-rotation rule, else True); and with `samples`: the energy
+#: [J] (else NaN), points (M, 2) [m], tangent (M,) [rad] and strains (M, 3) (eps [-],
+#: kappa [1/m], c1 [-]), or (0, 3) where the discretisation has none; without, (0, ...).
+OUTPUT_FIELDS = ('nodes', 'beta', 'theta', 'coefficients', 'valid', 'energy', 'points',
+                 'tangent', 'strains')
 
 
-# -- the circle fit -------------------------------------------------------------------------
+# -- the CCM -----------------------------------------------------------------------------------
 @_jit
-def signed_distances(params, x, z, r2):
-    """
-    Signed orthogonal distance of every point to the circle (A, D, phi), shape (M,).
-
-    The circle is A r^2 + B x + C z + D = 0 with (B, C) = sqrt(1 + 4 A D)(cos, sin)(phi);
-    the distance is 2 P / (1 + sqrt(1 + 4 A P)), P the implicit function (Chernov 2010,
-    section 8.2).
-    """
-    a, d, phi = params[0], params[1], params[2]
-    u = math.sqrt(max(1.0 + 4.0 * a * d, 0.0))
-    c, s = u * math.cos(phi), u * math.sin(phi)
-    out = np.empty(x.size)
-    for k in range(x.size):
-        p = a * r2[k] + c * x[k] + s * z[k] + d
-        out[k] = 2.0 * p / (1.0 + math.sqrt(max(1.0 + 4.0 * a * p, 0.0)))
-    return out
-
-
-@_jit
-def distance_jacobian(params, x, z, r2):
-    """Exact d(distance)/d(A, D, phi) of `signed_distances`, shape (M, 3)."""
-    a, d, phi = params[0], params[1], params[2]
-    u = math.sqrt(max(1.0 + 4.0 * a * d, 1e-300))
-    c, s = math.cos(phi), math.sin(phi)
-    jac = np.empty((x.size, 3))
-    for k in range(x.size):
-        along = c * x[k] + s * z[k]
-        p = a * r2[k] + u * along + d
-        q = math.sqrt(max(1.0 + 4.0 * a * p, 1e-300))
-        one_q = 1.0 + q
-        # d = 2 P / (1 + Q) with Q = sqrt(1 + 4 A P): partials in P and, explicitly, in A.
-        dd_dp = 2.0 / one_q - 2.0 * p / one_q ** 2 * (2.0 * a / q)
-        dd_da = -2.0 * p / one_q ** 2 * (2.0 * p / q)
-        jac[k, 0] = dd_dp * (r2[k] + 2.0 * d / u * along) + dd_da
-        jac[k, 1] = dd_dp * (1.0 + 2.0 * a / u * along)
-        jac[k, 2] = dd_dp * u * (-s * x[k] + c * z[k])
-    return jac
-
-
-@_jit
-def _pratt(x, z, r2):
-    """
-    Pratt's algebraic circle (A, B, C, D), B^2 + C^2 - 4 A D = 1, of centred, scaled points.
-
-    Its eigenvalue is the smallest non-negative root of det(M - eta N) (M the moment
-    matrix of (r^2, x, z, 1), N Pratt's constraint), found by Newton from 0 on that
-    quartic (Chernov 2010, section 5.3); the circle is the null vector of M - eta N,
-    regular for a straight line (A = 0).
-    """
-    n = x.size
-    mxx = myy = mxy = mxz = myz = mzz = 0.0
-    for k in range(n):
-        mxx += x[k] * x[k]
-        myy += z[k] * z[k]
-        mxy += x[k] * z[k]
-        mxz += x[k] * r2[k]
-        myz += z[k] * r2[k]
-        mzz += r2[k] * r2[k]
-    mxx, myy, mxy, mxz, myz, mzz = mxx / n, myy / n, mxy / n, mxz / n, myz / n, mzz / n
-    mz = mxx + myy
-    cov = mxx * myy - mxy * mxy
-    a2 = 4.0 * cov - 3.0 * mz * mz - mzz
-    a1 = mzz * mz + 4.0 * cov * mz - mxz * mxz - myz * myz - mz * mz * mz
-    a0 = mxz * mxz * myy + myz * myz * mxx - mzz * cov - 2.0 * mxz * myz * mxy + mz * mz * cov
-    eta = 0.0
-    value = 1e300
-    for _ in range(100):
-        previous = value
-        value = a0 + eta * (a1 + eta * (a2 + 4.0 * eta * eta))
-        if abs(value) >= abs(previous):
-            break
-        slope = a1 + eta * (2.0 * a2 + 16.0 * eta * eta)
-        if slope == 0.0:
-            break
-        step = value / slope
-        eta = max(eta - step, 0.0)
-        if abs(step) <= 1e-15 * max(eta, 1e-300):
-            break
-    # M (centred: the x and z means vanish) minus eta N, whose null vector is the circle.
-    m = np.empty((4, 4))
-    m[0, 0], m[0, 1], m[0, 2], m[0, 3] = mzz, mxz, myz, mz + 2.0 * eta
-    m[1, 1], m[1, 2], m[1, 3] = mxx - eta, mxy, 0.0
-    m[2, 2], m[2, 3] = myy - eta, 0.0
-    m[3, 3] = 1.0
-    for i in range(4):
-        for j in range(i):
-            m[i, j] = m[j, i]
-    out = _null_vector(m)
-    norm = out[1] * out[1] + out[2] * out[2] - 4.0 * out[0] * out[3]
-    if not norm > 0.0:
-        out = -out
-        norm = -norm
-    return out / math.sqrt(norm) if norm > 0.0 else out
-
-
-@_jit
-def _minor3(k, row, col):
-    """Return the determinant of 4 x 4 k with `row` and `col` struck out (a 3 x 3 minor)."""
-    rows = np.empty(3, dtype=np.int64)
-    cols = np.empty(3, dtype=np.int64)
-    a = b = 0
-    for i in range(4):
-        if i != row:
-            rows[a] = i
-            a += 1
-        if i != col:
-            cols[b] = i
-            b += 1
-    r0, r1, r2 = rows[0], rows[1], rows[2]
-    c0, c1, c2 = cols[0], cols[1], cols[2]
-    return (k[r0, c0] * (k[r1, c1] * k[r2, c2] - k[r1, c2] * k[r2, c1])
-            - k[r0, c1] * (k[r1, c0] * k[r2, c2] - k[r1, c2] * k[r2, c0])
-            + k[r0, c2] * (k[r1, c0] * k[r2, c1] - k[r1, c1] * k[r2, c0]))
-
-
-@_jit
-def _null_vector(k):
-    """
-    Null vector of a symmetric 4 x 4 k of rank 3 (or its least singular direction).
-
-    adj(k) = det(k) k^-1 is dominated by v v^T of the eigenvalue nearest zero, so its
-    column of largest diagonal entry is that eigenvector, up to scale.
-    """
-    best = 0
-    largest = -1.0
-    for j in range(4):
-        value = abs(_minor3(k, j, j))
-        if value > largest:
-            best, largest = j, value
-    out = np.empty(4)
-    for i in range(4):
-        out[i] = (-1.0) ** (i + best) * _minor3(k, best, i)
-    return out
-
-
-@_jit
-def _solve3(h, g, lam):
-    """Solve (h + lam diag(h)) dx = -g for the 3 x 3 normal matrix h (Cholesky)."""
-    a = h.copy()
-    for i in range(3):
-        a[i, i] += lam * max(h[i, i], 1e-300)
-    low, definite = arc_kernels._cholesky3(a)
-    if not definite:
-        return np.full(3, np.nan)
-    return arc_kernels._substitute3(low, -g)
-
-
-@_jit
-def _normal_equations(params, x, z, r2, h, g):
-    """Sum of squared distances at `params`; fills J^T J into h (3, 3) and J^T r into g."""
-    a, d, phi = params[0], params[1], params[2]
-    u = math.sqrt(max(1.0 + 4.0 * a * d, 1e-300))
-    c, s = math.cos(phi), math.sin(phi)
-    d_u, a_u = 2.0 * d / u, 2.0 * a / u
-    h[:, :] = 0.0
-    g[:] = 0.0
-    cost = 0.0
-    for k in range(x.size):
-        along = c * x[k] + s * z[k]
-        p = a * r2[k] + u * along + d
-        q = math.sqrt(max(1.0 + 4.0 * a * p, 1e-300))
-        inv = 1.0 / (1.0 + q)
-        r = 2.0 * p * inv
-        # As `distance_jacobian`: d = 2 P / (1 + Q), Q = sqrt(1 + 4 A P).
-        ratio = r * inv / q
-        dd_dp = 2.0 * inv - 2.0 * a * ratio
-        dd_da = -2.0 * p * ratio
-        j0 = dd_dp * (r2[k] + d_u * along) + dd_da
-        j1 = dd_dp * (1.0 + a_u * along)
-        j2 = dd_dp * u * (-s * x[k] + c * z[k])
-        cost += r * r
-        g[0] += j0 * r
-        g[1] += j1 * r
-        g[2] += j2 * r
-        h[0, 0] += j0 * j0
-        h[0, 1] += j0 * j1
-        h[0, 2] += j0 * j2
-        h[1, 1] += j1 * j1
-        h[1, 2] += j1 * j2
-        h[2, 2] += j2 * j2
-    h[1, 0], h[2, 0], h[2, 1] = h[0, 1], h[0, 2], h[1, 2]
-    return cost
-
-
-@_jit
-def _levenberg_marquardt(params, x, z, r2):
-    """
-    Minimise the sum of squared `signed_distances` over (A, D, phi) from `params`.
-
-    Marquardt's damping (lam diag(J^T J)) where a step does not decrease the cost; a
-    step below `_GAUSS_NEWTON` is taken undamped, since there the cost changes by less
-    than its own round-off and only Gauss-Newton's quadratic convergence still tells.
-    Stops once a step is below `_LM_XTOL`. (`signed_distances` and `distance_jacobian`
-    are the same formulas, one point at a time.) One evaluation and one solve per pass.
-    """
-    h = np.empty((3, 3))
-    g = np.empty(3)
-    h_trial = np.empty((3, 3))
-    g_trial = np.empty(3)
-    trial = params.copy()
-    cost = np.inf
-    size = np.inf
-    lam = 1e-3
-    for _ in range(_LM_ITERATIONS):
-        cost_trial = _normal_equations(trial, x, z, r2, h_trial, g_trial)
-        if cost_trial <= cost or size <= _GAUSS_NEWTON:
-            # Swap the buffers (a slice copy would cost seconds of compile).
-            params, cost = trial, cost_trial
-            h, h_trial = h_trial, h
-            g, g_trial = g_trial, g
-            lam = max(0.1 * lam, 1e-12)
-            if size <= _LM_XTOL:
-                break
-        elif cost == np.inf:
-            # Not finite where it starts: nothing to refine.
-            break
-        else:
-            lam *= 10.0
-            if not lam < 1e16:
-                break
-        step = _solve3(h, g, lam)
-        size = max(abs(step[0]), abs(step[1]), abs(step[2]))
-        if not size < np.inf:
-            break
-        trial = params + step
-    return params
-
-
-@_jit
-def circle_fit(points):
-    """
-    Orthogonal-distance circle through ordered points: (curvature, rmsd, centre X, centre Z).
-
-    The points are centred and scaled by their largest coordinate; Pratt's fit
-    (`_pratt`) starts Levenberg-Marquardt on the exact orthogonal distances in Chernov's
-    (A, D, phi), regular at zero curvature. The sign is fixed by the direction of travel:
-    curvature = 2 A > 0 when the path turns clockwise in (X, Z), i.e. curls towards -Z.
-    The centre is infinite for a straight line. Needs M >= 3 points.
-
-    References
-    ----------
-    Chernov, "Circular and Linear Regression" (2010), Sections 5.3 and 8.2;
-    docs/physics.md, section 9.
-    """
-    n = points.shape[0]
-    cx = cz = 0.0
-    for k in range(n):
-        cx += points[k, 0]
-        cz += points[k, 1]
-    if not (abs(cx) < np.inf and abs(cz) < np.inf):
-        # A non-finite sample (NaN or inf) makes a sum non-finite.
-        return np.nan, np.nan, np.nan, np.nan
-    cx /= n
-    cz /= n
-    scale = 0.0
-    for k in range(n):
-        scale = max(scale, abs(points[k, 0] - cx), abs(points[k, 1] - cz))
-    if scale == 0.0:
-        scale = 1.0
-    x = np.empty(n)
-    z = np.empty(n)
-    r2 = np.empty(n)
-    for k in range(n):
-        x[k] = (points[k, 0] - cx) / scale
-        z[k] = (points[k, 1] - cz) / scale
-        r2[k] = x[k] * x[k] + z[k] * z[k]
-    start = _pratt(x, z, r2)
-    params = np.array([start[0], start[3], math.atan2(start[2], start[1])])
-    params = _levenberg_marquardt(params, x, z, r2)
-    a, d, phi = params[0], params[1], params[2]
-    u = math.sqrt(max(1.0 + 4.0 * a * d, 0.0))
-    b, c = u * math.cos(phi), u * math.sin(phi)
-    dist = signed_distances(params, x, z, r2)
-    square = 0.0
-    for k in range(n):
-        square += dist[k] * dist[k]
-    # Orient the implicit function so that its gradient at the first point is on the left
-    # of the direction of travel; then A > 0 exactly for clockwise turning.
-    tx, tz = x[1] - x[0], z[1] - z[0]
-    if (2.0 * a * x[0] + b) * (-tz) + (2.0 * a * z[0] + c) * tx < 0.0:
-        a, b, c = -a, -b, -c
-    if a != 0.0:
-        center_x = cx + scale * (-b / (2.0 * a))
-        center_z = cz + scale * (-c / (2.0 * a))
-    else:
-        center_x = center_z = np.inf
-    return 2.0 * a / scale, scale * math.sqrt(square / n), center_x, center_z
-
-
-@_jit
-def outputs_kernel(state, lengths, stiffness, gas, pemc, work, tip_force, sample_segment,
-                   sample_offset):
-    """
-    Return the result fields of a state: nodes, samples on the arcs, strains, coefficients.
-
-    Parameters
-    ----------
-    state : ndarray, shape (N, 3)
-        (theta_i [rad], eps_i [-], c1_i [-]) of every segment.
-    lengths, stiffness, gas, pemc, work
-        As `energy_kernel`.
-    tip_force : ndarray, shape (2,)
-        (F_X, F_Z) at the tip [N].
-    sample_segment : ndarray of int64, shape (M,)
-        Segment of every sample, root to tip.
-    sample_offset : ndarray, shape (M,)
-        Reference arc length sigma of every sample from its segment's start [m].
-
-    Returns
-    -------
-    nodes : ndarray, shape (N + 1, 2)
-        [m].
-    points : ndarray, shape (M, 2)
-        Samples: at sigma into segment i the tangent has turned by kappa_i sigma and the
-        partial chord is (1 + eps_i) sigma S(kappa_i sigma) along the mean tangent [m];
-        the last is the tip.
-    tangent : ndarray, shape (M,)
-        [rad].
-    strains : ndarray, shape (M, 3)
-        (eps [-], kappa [1/m], c1 [-]).
-    beta : ndarray, shape (N,)
-        theta_i - theta_{i-1} [rad].
-    coefficients : ndarray, shape (N, 4)
-        (eps, -kappa^2/6, c1, kappa/2) [-, 1/m^2, -, 1/m].
-    energy : float
-        Total potential under the tip force [J].
-
-    """
-    n = lengths.size
-    x = np.empty(3 * n)
-    for i in range(n):
-        x[3 * i] = state[i, 1]
-        x[3 * i + 1] = state[i, 2]
-        x[3 * i + 2] = state[i, 0]
-    nodes = nodes_kernel(x, lengths)
-    prev = np.empty(n)
-    beta = np.empty(n)
-    kappa = np.empty(n)
-    coefficients = np.empty((n, 4))
-    before = 0.0
-    for i in range(n):
-        theta, eps, c1 = state[i, 0], state[i, 1], state[i, 2]
-        prev[i] = before
-        beta[i] = theta - before
-        kappa[i] = beta[i] / lengths[i]
-        coefficients[i, 0] = eps
-        coefficients[i, 1] = -(kappa[i] * kappa[i]) / 6.0
-        coefficients[i, 2] = c1
-        coefficients[i, 3] = 0.5 * kappa[i]
-        before = theta
-    m = sample_segment.size
-    points = np.empty((m, 2))
-    tangent = np.empty(m)
-    strains = np.empty((m, 3))
-    for k in range(m):
-        i = sample_segment[k]
-        sigma = sample_offset[k]
-        eps = state[i, 1]
-        turn = kappa[i] * sigma
-        half = prev[i] + 0.5 * turn
-        reach = ((1.0 + eps) * sigma) * _sinc0(turn)
-        points[k, 0] = nodes[i, 0] + reach * math.cos(half)
-        points[k, 1] = nodes[i, 1] + reach * math.sin(half)
-        tangent[k] = prev[i] + turn
-        strains[k, 0] = eps
-        strains[k, 1] = kappa[i]
-        strains[k, 2] = state[i, 2]
-    points[m - 1, 0], points[m - 1, 1] = nodes[n, 0], nodes[n, 1]
-    tip = np.full(1, n)
-    energy = energy_kernel(x, lengths, stiffness, gas, pemc, work, tip,
-                           tip_force.reshape(1, 2))
-    return nodes, points, tangent, strains, beta, coefficients, energy
-
-
-# -- midplane samples of the CCM ------------------------------------------------------------
-@_jit
-def ccm_samples(q, lengths, per_segment):
+def _ccm_samples(q, lengths, per_segment, nodes, theta):
     """
     CCM midplane samples at x = L_i j/m, j = 0..m-1 of every segment, then the tip.
 
-    Returns
-    -------
-    points : ndarray, shape (N m + 1, 2)
-        Global (X, Z) [m].
-    tangent : ndarray, shape (N m + 1,)
-        Angle of the tangent from +X towards +Z [rad].
+    Returns points (N m + 1, 2), global (X, Z) [m], and their tangent angles from +X
+    towards +Z (N m + 1,) [rad], from the chain's `nodes` and node angles `theta`.
 
     References
     ----------
     Zhou, Headings, Dapino (2022), eq. (15); SPEC "Derived outputs".
     """
-    nodes, theta, _ = chain.node_positions_kernel(q, lengths)
     n = q.shape[0]
     m = per_segment
     points = np.empty((n * m + 1, 2))
@@ -443,75 +59,133 @@ def ccm_samples(q, lengths, per_segment):
     return points, tangent
 
 
-# -- batches: the fit of many scenes' samples, over both cores --------------------------------
-@jit
-def ccm_circles(states, lengths, slots, per_segment):
+@_jit
+def ccm_outputs(p, q, pressure, nodes, forces, samples):
     """
-    Circle fit of S CCM states: (S, 2) of (curvature [1/m], rmsd [m]).
+    `OUTPUT_FIELDS` of a CCM state q (N, 4) (scaled unknowns); strains (0, 3): it has none.
 
-    Parameters
+    References
     ----------
-    states : ndarray, shape (S, N, 4)
-        Scaled unknowns q of every scene.
-    lengths : ndarray, shape (D, N)
-        Segment lengths of every solver [m].
-    slots : ndarray of int, shape (S,)
-        Solver of every scene.
-    per_segment : int
-        Samples per segment m.
-
+    Zhou, Headings, Dapino (2022), eqs. (15)-(16); SPEC "Kinematics", "Derived outputs".
     """
-    count = states.shape[0]
-    out = np.empty((count, 2))
-    for i in range(count):
-        points, _ = ccm_samples(states[i], lengths[slots[i]], per_segment)
-        curvature, rmsd, _, _ = circle_fit(points)
-        out[i, 0] = curvature
-        out[i, 1] = rmsd
-    return out
+    chain_nodes, theta, beta = chain.node_positions_kernel(q, p.lengths)
+    n = q.shape[0]
+    coefficients = q.copy()
+    valid = True
+    for i in range(n):
+        length = p.lengths[i]
+        coefficients[i, 1] = q[i, 1] / (length * length)
+        coefficients[i, 3] = q[i, 3] / length
+        if not abs(2.0 * q[i, 3]) < 1.0:
+            valid = False
+    if not samples:
+        return (chain_nodes, beta, theta, coefficients, valid, np.nan, np.empty((0, 2)),
+                np.empty(0), np.empty((0, 3)))
+    points, tangent = _ccm_samples(q, p.lengths, p.per_segment, chain_nodes, theta)
+    return (chain_nodes, beta, theta, coefficients, valid,
+            ccm_energy(p, q, pressure, nodes, forces), points, tangent, np.empty((0, 3)))
 
 
-@jit
-def pcc_circles(states, datas, sample_segment, sample_offset, slots, pressures, forces):
+# -- the PCC rod ---------------------------------------------------------------------------------
+@_jit
+def pcc_outputs(p, x, pressure, nodes, forces, samples):
     """
-    Circle fit of S PCC states through the result's own samples (`outputs_kernel`).
+    `OUTPUT_FIELDS` of a PCC state x (3 N,) (engine unknowns (eps_i, c1_i, theta_i)).
 
-    Parameters
+    A sample at sigma into segment i has turned by kappa_i sigma, and its partial chord is
+    (1 + eps_i) sigma S(kappa_i sigma) along the mean tangent: exactly on the arc; the last
+    sample is the tip. coefficients are (eps, -kappa^2/6, c1, kappa/2) [-, 1/m^2, -, 1/m],
+    the CCM's of a segment with the same uniform strain.
+
+    References
     ----------
-    states : ndarray, shape (S, 3 N)
-        Engine unknowns (eps_i, c1_i, theta_i) per segment.
-    datas : typed list of PCCData
-        The compiled discretisation of every solver.
-    sample_segment : ndarray of int, shape (D, M)
-    sample_offset : ndarray, shape (D, M)
-        Every solver's sample layout [m].
-    slots : ndarray of int, shape (S,)
-    pressures : ndarray, shape (S,)
-        [Pa].
-    forces : ndarray, shape (S, 2)
-        Tip force (F_X, F_Z) [N].
-
-    Returns
-    -------
-    ndarray, shape (S, 2)
-        (curvature [1/m], rmsd [m]).
-
+    docs/physics.md, sections 11.4 and 11.6.
     """
-    count = states.shape[0]
-    out = np.empty((count, 2))
-    for i in range(count):
-        data = datas[slots[i]]
-        n = data.lengths.size
-        state = np.empty((n, 3))
-        for k in range(n):
-            state[k, 0] = states[i, 3 * k + 2]
-            state[k, 1] = states[i, 3 * k]
-            state[k, 2] = states[i, 3 * k + 1]
-        points = outputs_kernel(
-            state, data.lengths, data.stiffness, data.gas, data.pemc,
-            data.pressure_coefficient * pressures[i], forces[i], sample_segment[slots[i]],
-            sample_offset[slots[i]])[1]
-        curvature, rmsd, _, _ = circle_fit(points)
-        out[i, 0] = curvature
-        out[i, 1] = rmsd
-    return out
+    lengths = p.lengths
+    n = lengths.size
+    chain_nodes = nodes_kernel(x, lengths)
+    prev = np.empty(n)
+    beta = np.empty(n)
+    kappa = np.empty(n)
+    coefficients = np.empty((n, 4))
+    before = 0.0
+    for i in range(n):
+        eps, c1, theta = x[3 * i], x[3 * i + 1], x[3 * i + 2]
+        prev[i] = before
+        beta[i] = theta - before
+        kappa[i] = beta[i] / lengths[i]
+        coefficients[i, 0] = eps
+        coefficients[i, 1] = -(kappa[i] * kappa[i]) / 6.0
+        coefficients[i, 2] = c1
+        coefficients[i, 3] = 0.5 * kappa[i]
+        before = theta
+    if not samples:
+        return (chain_nodes, beta, prev, coefficients, True, np.nan, np.empty((0, 2)),
+                np.empty(0), np.empty((0, 3)))
+    energy = energy_kernel(x, lengths, p.stiffness, p.gas, p.pemc,
+                           p.pressure_coefficient * pressure, nodes, forces)
+    m = p.sample_segment.size
+    points = np.empty((m, 2))
+    tangent = np.empty(m)
+    strains = np.empty((m, 3))
+    for k in range(m):
+        i = p.sample_segment[k]
+        sigma = p.sample_offset[k]
+        eps = x[3 * i]
+        turn = kappa[i] * sigma
+        half = prev[i] + 0.5 * turn
+        reach = ((1.0 + eps) * sigma) * _sinc0(turn)
+        points[k, 0] = chain_nodes[i, 0] + reach * math.cos(half)
+        points[k, 1] = chain_nodes[i, 1] + reach * math.sin(half)
+        tangent[k] = prev[i] + turn
+        strains[k, 0] = eps
+        strains[k, 1] = kappa[i]
+        strains[k, 2] = x[3 * i + 1]
+    points[m - 1, 0], points[m - 1, 1] = chain_nodes[n, 0], chain_nodes[n, 1]
+    return chain_nodes, beta, prev, coefficients, True, energy, points, tangent, strains
+
+
+# -- the arc -------------------------------------------------------------------------------------
+@_jit
+def arc_outputs(p, x, pressure, nodes, forces, samples):
+    """
+    `OUTPUT_FIELDS` of an arc state x = (eps, kappa L, c1) at `p.samples` evenly spaced s.
+
+    The point at s is (1 + eps) s S(kappa s) along (cos, sin)(kappa s / 2), exactly on the
+    arc; the tip (the last sample) is the engine's (`arc_node_jacobian`). coefficients are
+    the CCM's of one segment with the same uniform strain: (eps, -2 d^2/3, c1, d), d =
+    kappa / 2.
+
+    References
+    ----------
+    docs/physics.md, sections 11.2 and 11.3.
+    """
+    length = p.length
+    eps, kappa, c1 = x[0] / p.scale[0], x[1] / p.scale[1], x[2] / p.scale[2]
+    chain_nodes = np.zeros((2, 2))
+    tip = arc_node_jacobian(p, x, 1)[0]
+    chain_nodes[1, 0], chain_nodes[1, 1] = tip[0], tip[1]
+    beta = np.full(1, kappa * length)
+    d = 0.5 * kappa
+    coefficients = np.empty((1, 4))
+    coefficients[0, 0], coefficients[0, 1] = eps, -2.0 * d * d / 3.0
+    coefficients[0, 2], coefficients[0, 3] = c1, d
+    theta = np.zeros(1)
+    if not samples:
+        return (chain_nodes, beta, theta, coefficients, True, np.nan, np.empty((0, 2)),
+                np.empty(0), np.empty((0, 3)))
+    energy = arc_energy(p, x, pressure, nodes, forces)
+    m = p.samples
+    points = np.empty((m, 2))
+    tangent = np.empty(m)
+    strains = np.empty((m, 3))
+    for k in range(m):
+        s = length * k / (m - 1)
+        turn = kappa * s
+        reach = ((1.0 + eps) * s) * _sinc0(turn)
+        points[k, 0] = reach * math.cos(0.5 * turn)
+        points[k, 1] = reach * math.sin(0.5 * turn)
+        tangent[k] = turn
+        strains[k, 0], strains[k, 1], strains[k, 2] = eps, kappa, c1
+    points[m - 1, 0], points[m - 1, 1] = tip[0], tip[1]
+    return chain_nodes, beta, theta, coefficients, True, energy, points, tangent, strains
