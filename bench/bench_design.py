@@ -83,13 +83,11 @@ class _Stages:
 
     def __init__(self):
         from fpc_gripper.model import engine, selection
-        from fpc_gripper.model.kernels import shapes as shape_kernels
         self.targets = [(batch, 'finger_model', 'build models (finger_model)'),
                         (selection.AdaptiveSolver, 'choose_many', 'choose models'),
-                        (engine, 'solve_batch', 'compiled equilibria (solve_batch)'),
-                        (engine, 'rigidity_batch', 'compiled K_x (rigidity_batch)'),
-                        (shape_kernels, 'ccm_circles', 'circle fits'),
-                        (shape_kernels, 'pcc_circles', 'circle fits')]
+                        (engine, 'solve_batch',
+                         'compiled equilibria and circle fits (solve_batch)'),
+                        (engine, 'rigidity_batch', 'compiled K_x (rigidity_batch)')]
         self.spent = {}
 
     def _wrap(self, function, label):

@@ -372,25 +372,25 @@ def choose_model(scene, tolerance, error_model=None):
     if tolerance <= 0.0:
         raise ValueError(f'`tolerance` must be > 0 [m], got {tolerance}')
     model = load_error_model() if error_model is None else error_model
-    return _choose(model, _scene_bin(model, scene, scene_turning(scene, model)), tolerance)
+    return _choose(model, _scene_bin(model, scene.design.prestrain, scene.pressure, scene.load,
+                                     scene_turning(scene, model)), tolerance)
 
 
-def _scene_bin(model, scene, turning):
+def _scene_bin(model, prestrain, pressure, load, turning):
     """
     Return the error-model cell of a scene: (turning bin, load bin), or why it is outside.
 
     Two scenes in the same cell get the same choice for any tolerance.
     """
     ranges = model['ranges']
-    prestrain = scene.design.prestrain
     outside = []
     if not ranges['prestrain'][0] <= prestrain <= ranges['prestrain'][1]:
         outside.append(f'prestrain {prestrain:g}')
-    if not scene.pressure <= ranges['pressure'][1]:
-        outside.append(f'pressure {scene.pressure:g} Pa')
+    if not pressure <= ranges['pressure'][1]:
+        outside.append(f'pressure {pressure:g} Pa')
     load_edges = model['load_bins']
-    if scene.load > load_edges[-1] * (1 + 1e-12):
-        outside.append(f'load {scene.load:g} N')
+    if load > load_edges[-1] * (1 + 1e-12):
+        outside.append(f'load {load:g} N')
     turn_edges = model['turning_bins']
     if turning > turn_edges[-1]:
         outside.append(f'turning {turning:.3g} rad')
@@ -398,7 +398,7 @@ def _scene_bin(model, scene, turning):
         return tuple(outside)
     # bisect_left on the sorted edges is searchsorted(side='left') without an array copy.
     return (bisect.bisect_left(turn_edges, turning),
-            bisect.bisect_left(load_edges, scene.load * (1 - 1e-12)))
+            bisect.bisect_left(load_edges, load * (1 - 1e-12)))
 
 
 def _static_cost(entry):
@@ -516,21 +516,21 @@ class AdaptiveSolver:
 
         Choices are cached per error-model cell, which the choice is a function of.
         """
-        scene = Scene(self.design, pressure, tuple(tip_force), self.pressure_model)
-        return self._choice(scene, self._feature.turning(scene.pressure, scene.tip_force))
+        pressure, force = check_load(pressure, tip_force, self.design.max_pressure)
+        return self._choice(pressure, force, self._feature.turning(pressure, force))
 
     def choose_many(self, pressures, tip_forces):
         """Return `choose` of many scenes; their loaded arc features are solved as a batch."""
-        scenes = [Scene(self.design, p, tuple(f), self.pressure_model)
+        scenes = [check_load(p, f, self.design.max_pressure)
                   for p, f in zip(pressures, tip_forces)]
         if not scenes:
             return []
-        turnings = self._feature.turnings([s.pressure for s in scenes],
-                                          [s.tip_force for s in scenes])
-        return [self._choice(scene, turning) for scene, turning in zip(scenes, turnings)]
+        turnings = self._feature.turnings([p for p, _ in scenes], [f for _, f in scenes])
+        return [self._choice(p, f, turning) for (p, f), turning in zip(scenes, turnings)]
 
-    def _choice(self, scene, turning):
-        cell = _scene_bin(self._model, scene, turning)
+    def _choice(self, pressure, force, turning):
+        cell = _scene_bin(self._model, self.design.prestrain, pressure, math.hypot(*force),
+                          turning)
         choice = self._choices.get(cell)
         if choice is None:
             choice = self._choices[cell] = _choose(self._model, cell, self.tolerance)

@@ -5,7 +5,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from .solves import _compiled, _flat, _packed, _rigidity_entry, _solve_entry, SOLVE, TIP
+from .solves import _compiled, _flat, _one, _packed, _rigidity_entry, _solve_entry, SOLVE, TIP
 from ..compiled import over_cores
 
 
@@ -98,7 +98,9 @@ def _batch_inputs(problems, loaded, options):
                 or not np.array_equal(_packed(problem, options, flat.shape)[1], cap):
             raise ValueError('`problems` must share one discretisation type, number of '
                              'unknowns and options')
-    return numba.typed.List(datas), flat, opts, cap
+    # One problem's list is built once (building a typed list costs 0.3-0.5 ms).
+    datas = _one(problems[0], loaded) if len(problems) == 1 else numba.typed.List(datas)
+    return datas, flat, opts, cap
 
 
 def batch_key(problem, options, loaded):
