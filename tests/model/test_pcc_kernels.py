@@ -7,8 +7,8 @@ import pytest
 
 from fpc_gripper.model import ActuatorDesign, engine
 from fpc_gripper.model.discretisations.pcc import half_angle_sinc, PCCSolver
-from fpc_gripper.model.kernels import linear, pcc as pcc_kernels, pcc_section, shapes
-from fpc_gripper.model.kernels.shapes import OUTPUT_FIELDS
+from fpc_gripper.model.engine.newton import OUTPUT_FIELDS
+from fpc_gripper.model.kernels import linear, pcc as pcc_kernels, pcc_section
 
 #: Kernels against the reference: the same formulas, in the same order but for dot
 #: products and einsum, leave round-off only (seen <= 1.9e-15), relative to the largest
@@ -73,13 +73,13 @@ def test_kernels_run_compiled():
     linear.banded_step(hess.lower, grad)
     solver.node_jacobian(x, 24)
     solver.nodes(x)
-    shapes.pcc_outputs(data, x, 1e5, *solver._load_arrays([]), True)
+    pcc_kernels.pcc_outputs(data, x, 1e5, *solver._load_arrays([]), True)
     half_angle_sinc(np.array([0.5]))
     for module, name in ((pcc_section, 'half_angle_sinc_kernel'), (pcc_kernels, 'energy_kernel'),
                          (pcc_kernels, 'derivatives_kernel'), (linear, 'banded_cholesky'),
                          (linear, 'cholesky_solve'), (linear, 'banded_step'),
                          (pcc_kernels, 'nodes_kernel'), (pcc_kernels, 'node_jacobian_kernel'),
-                         (shapes, 'pcc_outputs'), (pcc_kernels, 'pcc_derivatives'),
+                         (pcc_kernels, 'pcc_outputs'), (pcc_kernels, 'pcc_derivatives'),
                          (pcc_kernels, 'pcc_energy'), (pcc_kernels, 'pcc_solve_linear')):
         kernel = getattr(module, name)
         assert kernel.signatures and kernel.targetoptions['nopython'], name

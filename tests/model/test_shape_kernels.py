@@ -114,7 +114,7 @@ def test_ccm_samples_equal_the_numpy_reference(reconstruction):
         result = solver.solve(pressure, (0.2, -0.3))
         ref_points, ref_tangent = ccm_reference.midplane_samples(
             result.state, solver.segments.lengths, 16)
-        # The result's samples, computed in the solve's compiled call (`shapes.ccm_outputs`).
+        # The result's samples, computed in the solve's compiled call (`kernels.ccm.ccm_outputs`).
         np.testing.assert_allclose(result.points, ref_points, rtol=0, atol=1e-15)
         np.testing.assert_allclose(result.tangent, ref_tangent, rtol=0, atol=1e-14)
 

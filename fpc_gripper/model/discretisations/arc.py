@@ -6,7 +6,7 @@ import numpy as np
 
 from .rung import RungSolver, set_common
 from ..engine import CompiledProblem, linear_solve, NewtonOptions, register
-from ..kernels import arc as arc_kernels, shapes
+from ..kernels import arc as arc_kernels
 from ..kernels.chain import load_arrays
 from ..kernels.pcc_section import half_angle_sinc_kernel, section_arrays
 from ..result import finger_constants
@@ -16,7 +16,7 @@ from ..validation import arc_lengths
 __all__ = ['ArcSolver', 'positions_at']
 
 # The engine runs this discretisation compiled through these hooks (`engine.register`).
-register(arc_kernels.ArcData, dict(arc_kernels.ARC_HOOKS, outputs=shapes.arc_outputs))
+register(arc_kernels.ArcData, arc_kernels.ARC_HOOKS)
 
 #: Gauss rule on [0, 1] for the arc integrals int_0^1 (cos, sin)(phi t) t^k dt; exact to
 #: round-off for |phi| up to about 40 rad (several full turns).

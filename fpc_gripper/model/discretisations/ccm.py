@@ -10,7 +10,7 @@ from .. import engine
 from ..analysis import flexural_rigidity
 from ..design import ActuatorDesign
 from ..engine import linear_solve, linear_step, NewtonOptions, SolverStatus
-from ..kernels import ccm as kernels, shapes
+from ..kernels import ccm as kernels
 from ..kernels.chain import load_arrays, node_jacobian
 from ..result import finger_constants, finger_result, Result
 from ..section.segments import build_segments, uniform_edges
@@ -22,7 +22,7 @@ __all__ = ['CCMSolver', 'SolverStatus', 'AXES', 'check_rigidity', 'rigidity_resu
            'pressure_work_factor', 'positions_at', 'CCM_RUNGS', 'RIGIDITY_FIELDS']
 
 # The engine runs this discretisation compiled through these hooks (`engine.register`).
-engine.register(kernels.CCMData, dict(kernels.CCM_HOOKS, outputs=shapes.ccm_outputs))
+engine.register(kernels.CCMData, kernels.CCM_HOOKS)
 
 #: Midplane reconstructions: the paper's, or one that converges to the rod as N grows
 #: (ccm_geometry.consistent_strain_map).

@@ -6,7 +6,7 @@ import numpy as np
 
 from .rung import check_common, RungSolver, set_common
 from ..engine import CompiledProblem, NewtonOptions, register
-from ..kernels import linear, pcc as kernels, shapes
+from ..kernels import linear, pcc as kernels
 from ..kernels.pcc_section import half_angle_sinc_kernel, section_arrays
 from ..result import finger_constants
 from ..section.law import station_layout
@@ -16,7 +16,7 @@ from ..validation import arc_lengths
 __all__ = ['PCCSolver', 'pcc_edges', 'half_angle_sinc', 'material_jacobian', 'positions_at']
 
 # The engine runs this discretisation compiled through these hooks (`engine.register`).
-register(kernels.PCCData, dict(kernels.PCC_HOOKS, outputs=shapes.pcc_outputs))
+register(kernels.PCCData, kernels.PCC_HOOKS)
 
 #: Step caps: 0.1 on (eps, c1) as the rod, 0.5 rad on the angles.
 _CAP = np.array([0.1, 0.1, 0.5])

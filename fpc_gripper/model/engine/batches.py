@@ -5,7 +5,8 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from .solves import _compiled, _flat, _one, _packed, _rigidity_entry, _solve_entry, SOLVE, TIP
+from .solves import (_compiled, _CONTROL, _flat, _one, _packed, _rigidity_entry, _solve_entry,
+                     _WIDE, SOLVE, TIP)
 from ..compiled import over_cores
 
 
@@ -43,9 +44,6 @@ class BatchOutcome:
     energy: np.ndarray = None
     curvature: np.ndarray = None
     fit_rmsd: np.ndarray = None
-    #: The scenes' flat output rows and the sizes that cut them (`solves._fields`).
-    shapes: np.ndarray = None
-    sizes: np.ndarray = None
 
 
 @dataclass(frozen=True)
@@ -174,11 +172,10 @@ def solve_batch(problems, design, pressures, nodes, forces, options, initial=Non
         return _solve_entry(datas, design[lo:hi], pressures[lo:hi], nodes, forces[lo:hi],
                             initial[lo:hi] if warm else initial, flat, opts, cap, SOLVE,
                             int(level))
-    states, figures, shapes, sizes = over_cores(run, pressures.size)
+    states, figures, shapes = over_cores(run, pressures.size)
     return BatchOutcome(states, figures[:, 10].astype(np.int64),
                         figures[:, 11].astype(np.int64), *figures[:, :4].T, figures[:, 4:6],
-                        figures[:, 7] == 1.0, *figures[:, [6, 8, 9]].T, shapes,
-                        sizes[:5] if sizes.size else sizes)
+                        figures[:, 7] == 1.0, *figures[:, [6, 8, 9]].T)
 
 
 def rigidity_batch(problems, design, pressures, node, direction, displacement, options):
@@ -214,10 +211,11 @@ def rigidity_batch(problems, design, pressures, node, direction, displacement, o
     def run(lo, hi):
         return _rigidity_entry(free, loaded, design[lo:hi], pressures[lo:hi], int(node),
                                direction, float(displacement), cold, flat, opts, cap, TIP)
-    unloaded_x, states, figures, free_figures = over_cores(run, pressures.size)[:4]
-    unloaded = BatchOutcome(unloaded_x, free_figures[:, 10].astype(np.int64),
-                            free_figures[:, 11].astype(np.int64), *free_figures[:, :4].T,
-                            free_figures[:, 4:6], free_figures[:, 7] == 1.0)
+    unloaded_x, states, figures, _ = over_cores(run, pressures.size)
+    free = figures[:, _CONTROL:_CONTROL + _WIDE]
+    unloaded = BatchOutcome(unloaded_x, free[:, 10].astype(np.int64),
+                            free[:, 11].astype(np.int64), *free[:, :4].T, free[:, 4:6],
+                            free[:, 7] == 1.0)
     force = np.where(figures[:, 6] == 1.0, figures[:, 0], np.nan)
     return BatchRigidity(unloaded, states, force, figures[:, 7].astype(np.int64),
                          figures[:, 1], figures[:, 2] == 1.0, figures[:, 3], figures[:, 4:6])

@@ -34,10 +34,19 @@ def linear_solve(hess, rhs):
 # here (`register`) with compiled functions of the same names taking the namedtuple first
 # (the loops then run compiled, for that type). These functions are that interface; the
 # loops call nothing else. The first six (`HOOKS`) serve every solve (`outputs`: the fields of
-# a state, `kernels.shapes.OUTPUT_FIELDS`); the three `_point_*` (`POINT_HOOKS`: face points,
-# the PCC and the rod) serve contact only.
+# a state, `OUTPUT_FIELDS`); the three `_point_*` (`POINT_HOOKS`: face points, the PCC and
+# the rod) serve contact only.
 HOOKS = ('derivatives', 'energy', 'step', 'solve_linear', 'node_jacobian', 'outputs')
 POINT_HOOKS = ('point_derivatives', 'point_jacobian', 'point_positions')
+#: What every `outputs` hook returns, in order. nodes (N + 1, 2) [m], the tip last; beta (N,)
+#: and theta (N,), every segment's rotation and its angle at its start [rad]; coefficients
+#: (N, 4) (b1 [-], b3 [1/m^2], c1 [-], d [1/m]), or (0, 4) where the discretisation has
+#: none; valid (the CCM's small-rotation rule, else True); and with `samples`: the energy
+#: [J] (else NaN), points (M, 2) [m], tangent (M,) [rad] and strains (M, 3) (eps [-],
+#: kappa [1/m], c1 [-]), or (0, 3) where the discretisation has none; without, (0, ...).
+OUTPUT_FIELDS = ('nodes', 'beta', 'theta', 'coefficients', 'valid', 'energy', 'points',
+                 'tangent', 'strains')
+
 _REGISTERED = {}
 
 
@@ -105,7 +114,7 @@ def _node_jacobian(problem, x, node):
 
 
 def _outputs(problem, x, pressure, nodes, forces, samples):
-    """Return the fields of a state, `kernels.shapes.OUTPUT_FIELDS` (samples where asked)."""
+    """Return the fields of a state, `OUTPUT_FIELDS` (samples where asked)."""
     return problem.outputs(x, pressure, _loads(nodes, forces), samples)
 
 

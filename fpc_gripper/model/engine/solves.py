@@ -28,51 +28,55 @@ OUTPUTS = ('tip', 'shape', 'all')
 #: What the solve entry does with each scene: solve it (warm, cold, continuation), run Newton
 #: alone from `initial`, or take `initial` as the state and compute its outputs only.
 SOLVE, NEWTON, GIVEN = 0, 1, 2
-#: Columns of the entries' per-scene `figures`.
+#: Columns of the entries' per-scene `figures`: then, in five more, the `_output_sizes`.
 FIGURES = ('gradient', 'step', 'min_eig', 'fraction', 'tip_x', 'tip_z', 'energy', 'valid',
            'curvature', 'fit_rmsd', 'status', 'iterations')
+#: Width of a scene's figures: `FIGURES` and the output sizes.
+_WIDE = len(FIGURES) + 5
 
 
 @register_jitable
-def _put_outputs(i, out, level, figures, shapes):
+def _put_outputs(i, out, level, figures, base, shapes, offset):
     """
-    Store scene i's `_outputs`: tip and validity in its figures; from SHAPE its arrays.
+    Store scene i's `_outputs` from column `base` of its figures and `offset` of its shapes.
 
-    The arrays go flat into row i of `shapes` (allocated with the first scene's
-    `_output_sizes` when i is 0): nodes, beta, theta, coefficients, points, tangent,
-    strains; the energy and, from ALL, the circle fit of the points into its figures.
+    Its figures get the tip, validity and output sizes (`_output_sizes`), from SHAPE the
+    energy, from ALL the circle fit of its points; from SHAPE its arrays go flat into
+    row i of `shapes`: nodes, beta, theta, coefficients, points, tangent, strains.
     """
     tip = out[0].shape[0] - 1
-    figures[i, 4] = out[0][tip, 0]
-    figures[i, 5] = out[0][tip, 1]
-    figures[i, 7] = 1.0 if out[4] else 0.0
+    figures[i, base + 4] = out[0][tip, 0]
+    figures[i, base + 5] = out[0][tip, 1]
+    figures[i, base + 7] = 1.0 if out[4] else 0.0
+    sizes = _output_sizes(out)
+    for k in range(5):
+        figures[i, base + 12 + k] = sizes[k]
     if level < SHAPE:
         return
-    figures[i, 6] = out[5]
-    k = 0
+    figures[i, base + 6] = out[5]
+    k = offset
     for part in (out[0].ravel(), out[1], out[2], out[3].ravel(), out[6].ravel(), out[7],
                  out[8].ravel()):
         for value in part:
             shapes[i, k] = value
             k += 1
     if level >= ALL and out[6].shape[0] >= 3:
-        figures[i, 8], figures[i, 9], _, _ = circle_fit(out[6])
+        figures[i, base + 8], figures[i, base + 9], _, _ = circle_fit(out[6])
 
 
 @register_jitable
 def _output_sizes(out):
     """(nodes, segments, coefficient rows, samples, strain rows) of one scene's `_outputs`."""
-    return np.array([out[0].shape[0], out[1].size, out[3].shape[0], out[6].shape[0],
-                     out[8].shape[0]])
+    return (out[0].shape[0], out[1].size, out[3].shape[0], out[6].shape[0], out[8].shape[0])
 
 
 @register_jitable
-def _new_shapes(count, sizes, level):
-    """Return flat output rows for `count` scenes of these `_output_sizes` (none below SHAPE)."""
+def _shape_width(out, level):
+    """Return the width of a scene's flat output row (0 below SHAPE)."""
     if level < SHAPE:
-        return np.empty((0, 0))
-    width = 2 * sizes[0] + 2 * sizes[1] + 4 * sizes[2] + 3 * sizes[3] + 3 * sizes[4]
-    return np.empty((count, width))
+        return 0
+    nodes, n, rows, m, strain_rows = _output_sizes(out)
+    return 2 * nodes + 2 * n + 4 * rows + 3 * m + 3 * strain_rows
 
 
 @jit
@@ -81,14 +85,13 @@ def _solve_entry(problems, design, pressures, nodes, forces, initial, flat, opti
     """
     Solve scene i on ``problems[design[i]]`` as `mode` says; its outputs to `level`.
 
-    Returns the states, their `FIGURES` (S, 12), the flat output rows (`_put_outputs`; no
-    rows below SHAPE) and the `_output_sizes` that cut a row into its arrays.
+    Returns the states, their figures (S, `_WIDE`: `FIGURES`, then the output sizes) and
+    the flat output rows (`_put_outputs`; none below SHAPE).
     """
     count = pressures.size
     warm = initial.shape[0] > 0
     states = np.empty((count,) + flat.shape)
-    figures = np.full((count, 12), np.nan)
-    sizes = np.zeros(5, dtype=np.int64)
+    figures = np.full((count, _WIDE), np.nan)
     shapes = np.empty((0, 0))
     for i in range(count):
         problem = problems[design[i]]
@@ -108,10 +111,13 @@ def _solve_entry(problems, design, pressures, nodes, forces, initial, flat, opti
         figures[i, 11] = its
         out = _outputs(problem, x, pressures[i], nodes, forces[i], level >= SHAPE)
         if i == 0:
-            sizes = _output_sizes(out)
-            shapes = _new_shapes(count, sizes, level)
-        _put_outputs(i, out, level, figures, shapes)
-    return states, figures, shapes, sizes
+            shapes = np.empty((count if level >= SHAPE else 0, _shape_width(out, level)))
+        _put_outputs(i, out, level, figures, 0, shapes, 0)
+    return states, figures, shapes
+
+
+#: Columns of the rigidity entry's own figures, before the two states' (`_WIDE` each).
+_CONTROL = 9
 
 
 @jit
@@ -120,44 +126,42 @@ def _rigidity_entry(unloaded, loaded, design, pressures, node, direction, displa
     """
     Scene i: the unloaded `_solve` (warm from ``initial[i]`` if given), then `_rigidity`.
 
-    Returns the unloaded and the loaded states; figures (S, 9) of the displacement control
-    (force, fraction, stable, gradient, the loaded node's (X, Z), found, iterations, and
-    the unloaded solve's iterations); and the `FIGURES`, flat output rows and sizes of
-    the unloaded state and of the loaded one (under the found force at `node`), as
-    `_solve_entry`'s, to `level`.
+    Returns the unloaded and the loaded states; figures (S, 9 + 2 `_WIDE`): the
+    displacement control's (force, fraction, stable, gradient, the loaded node's (X, Z),
+    found, iterations, the unloaded solve's iterations), then the unloaded state's and
+    the loaded one's (under the found force at `node`) as `_solve_entry`'s; and their flat
+    output rows side by side, to `level`.
     """
     count = pressures.size
     warm = initial.shape[0] > 0
     free = np.empty((count,) + flat.shape)
     states = np.empty((count,) + flat.shape)
-    figures = np.full((count, 9), np.nan)
-    free_figures = np.full((count, 12), np.nan)
-    loaded_figures = np.full((count, 12), np.nan)
-    sizes = np.zeros(5, dtype=np.int64)
-    free_shapes = np.empty((0, 0))
-    loaded_shapes = np.empty((0, 0))
+    figures = np.full((count, _CONTROL + 2 * _WIDE), np.nan)
+    shapes = np.empty((0, 0))
+    width = 0
+    base = _CONTROL + _WIDE
     no_nodes = np.zeros(0, dtype=np.int64)
     no_forces = np.zeros((0, 2))
     tip_nodes = np.full(1, node, dtype=np.int64)
     tip_forces = np.zeros((1, 2))
     for i in range(count):
         d = design[i]
-        x, code, its, free_figures[i, 0], free_figures[i, 1], free_figures[i, 2], \
-            free_figures[i, 3] = _solve(unloaded[d], initial[i] if warm else flat, warm, flat,
-                                        pressures[i], no_nodes, no_forces, options, cap)
-        free_figures[i, 10] = code
-        free_figures[i, 11] = its
+        x, code, its, figures[i, _CONTROL], figures[i, _CONTROL + 1], \
+            figures[i, _CONTROL + 2], figures[i, _CONTROL + 3] = _solve(
+                unloaded[d], initial[i] if warm else flat, warm, flat, pressures[i], no_nodes,
+                no_forces, options, cap)
+        figures[i, _CONTROL + 10] = code
+        figures[i, _CONTROL + 11] = its
         figures[i, 8] = its
         free[i] = x
         states[i] = x
         out = _outputs(unloaded[d], x, pressures[i], no_nodes, no_forces, level >= SHAPE)
         if i == 0:
-            sizes = _output_sizes(out)
-            free_shapes = _new_shapes(count, sizes, level)
-            loaded_shapes = _new_shapes(count, sizes, level)
-        _put_outputs(i, out, level, free_figures, free_shapes)
+            width = _shape_width(out, level)
+            shapes = np.empty((count if level >= SHAPE else 0, 2 * width))
+        _put_outputs(i, out, level, figures, _CONTROL, shapes, 0)
         if code != _SUCCESS:
-            _put_outputs(i, out, level, loaded_figures, loaded_shapes)
+            _put_outputs(i, out, level, figures, base, shapes, width)
             continue
         y, force, ok, its, done, stable, gradient = _rigidity(
             loaded[d], x, pressures[i], node, direction, displacement, options, cap)
@@ -174,9 +178,8 @@ def _rigidity_entry(unloaded, loaded, design, pressures, node, direction, displa
         tip_forces[0, 0] = force * direction[0]
         tip_forces[0, 1] = force * direction[1]
         out = _outputs(loaded[d], y, pressures[i], tip_nodes, tip_forces, level >= SHAPE)
-        _put_outputs(i, out, level, loaded_figures, loaded_shapes)
-    return free, states, figures, free_figures, free_shapes, loaded_figures, loaded_shapes, \
-        sizes
+        _put_outputs(i, out, level, figures, base, shapes, width)
+    return free, states, figures, shapes
 
 
 # numpy's error model (a division by zero gives inf or nan, which the loops test for) keeps
@@ -291,24 +294,25 @@ def _no_start(problem, flat):
 
 def _scene(out, k=0, level=None):
     """Return the `NewtonOutcome` of scene k of a `_solve_entry` call (fields to `level`)."""
-    states, figures = out[:2]
-    grad, step, eig, fraction, *_, code, its = row = figures[k].tolist()
-    return NewtonOutcome(states[k], _STATUS[int(code)], int(its), grad, step, eig, fraction,
-                         None if level is None else _fields(row, out[2], k, out[3], level))
+    states, figures, shapes = out
+    grad, step, eig, fraction = (row := figures[k].tolist())[:4]
+    return NewtonOutcome(states[k], _STATUS[int(row[10])], int(row[11]), grad, step, eig,
+                         fraction, None if level is None else _fields(row, shapes[k:k + 1],
+                                                                      level))
 
 
-def _fields(figures, shapes, k, sizes, level):
+def _fields(figures, shapes, level):
     """
-    Return the `Fields` of scene k: its `FIGURES` row (a list), and its row of `shapes`.
+    Return the `Fields` of a state: its `FIGURES` and sizes (a list), and its flat outputs.
 
-    `sizes` are the entry's `_output_sizes`; the arrays are views of the row.
+    `shapes` starts at the state's first output (the arrays are views of it).
     """
     tip, valid = np.array(figures[4:6]), figures[7] == 1.0
     if level < SHAPE:
         return Fields(tip, None, valid, None, None, None, None, None, None, None, None, None)
     energy, _, curvature, rmsd = figures[6:10]
-    n_nodes, n, rows, m, strain_rows = sizes.tolist()
-    row = shapes[k]
+    n_nodes, n, rows, m, strain_rows = (int(v) for v in figures[12:17])
+    row = shapes.reshape(-1)
     a = 2 * n_nodes
     b = a + n
     c = b + n
@@ -449,7 +453,7 @@ def outputs(problem, states, pressures, loads, level=ALL):
     out = _solve_entry(_one(problem, loaded), np.zeros(count, dtype=np.int64),
                        np.asarray(pressures, dtype=float), nodes, forces, states, flat, opts, cap,
                        GIVEN, level)
-    return [_fields(out[1][k].tolist(), out[2], k, out[3], level) for k in range(count)]
+    return [_fields(out[1][k].tolist(), out[2][k:k + 1], level) for k in range(count)]
 
 
 def rigidity(problem, pressure, node, direction, displacement, options, initial=None,
@@ -510,17 +514,19 @@ def rigidity(problem, pressure, node, direction, displacement, options, initial=
     out = _rigidity_entry(free, _one(problem, True), _SCENE, np.array((float(pressure),)),
                           int(node), direction, float(displacement),
                           start[None] if warm else none, flat, opts, cap, level)
-    unloaded_x, states, figures, free_figures, free_shapes, loaded_figures, loaded_shapes, \
-        sizes = out
-    grad, step, eig, fraction, *_, code, its = row = free_figures[0].tolist()
-    unloaded = NewtonOutcome(unloaded_x[0], _STATUS[int(code)], int(its), grad, step, eig,
-                             fraction, _fields(row, free_shapes, 0, sizes, level))
+    unloaded_x, states, figures, shapes = out
+    row = figures[0].tolist()
+    free, loaded = row[_CONTROL:_CONTROL + _WIDE], row[_CONTROL + _WIDE:]
+    width = shapes.shape[1] // 2
+    grad, step, eig, fraction = free[:4]
+    unloaded = NewtonOutcome(unloaded_x[0], _STATUS[int(free[10])], int(free[11]), grad, step,
+                             eig, fraction, _fields(free, shapes[:1, :width], level))
     if unloaded.status is not SolverStatus.SUCCESS:
         return _not_loaded(unloaded)
-    force, done, stable, gradient, tip_x, tip_z, found, its, _ = figures[0].tolist()
+    force, done, stable, gradient, tip_x, tip_z, found, its, _ = row[:_CONTROL]
     return _bordered((states[0], force, found == 1.0, its, done, stable == 1.0, gradient),
                      np.array((tip_x, tip_z)), unloaded,
-                     _fields(loaded_figures[0].tolist(), loaded_shapes, 0, sizes, level))
+                     _fields(loaded, shapes[:1, width:], level))
 
 
 def _not_loaded(unloaded):

@@ -1,1 +1,1 @@
-"""The compiled kernels of each discretisation: energies, exact derivatives and shapes."""
+"""The compiled kernels of each discretisation: energies, exact derivatives and outputs."""

@@ -5,7 +5,7 @@ import math
 
 import numpy as np
 
-from .pcc_section import _section_energy, _section_slopes
+from .pcc_section import _section_energy, _section_slopes, _sinc0
 from ..compiled import jit
 
 __all__ = ['ArcData', 'arc_integrals', 'arc_derivatives', 'arc_energy', 'arc_step',
@@ -181,6 +181,55 @@ def arc_node_jacobian(p, x, node):
     return position, jac
 
 
+# -- the outputs of a state ---------------------------------------------------------------
+@_jit
+def arc_outputs(p, x, pressure, nodes, forces, samples):
+    """
+    Return `engine.newton.OUTPUT_FIELDS` of an arc state x = (eps, kappa L, c1).
+
+    Its samples lie at `p.samples` evenly spaced s.
+
+    The point at s is (1 + eps) s S(kappa s) along (cos, sin)(kappa s / 2), exactly on the
+    arc; the tip (the last sample) is the engine's (`arc_node_jacobian`). coefficients are
+    the CCM's of one segment with the same uniform strain: (eps, -2 d^2/3, c1, d), d =
+    kappa / 2.
+
+    References
+    ----------
+    docs/physics.md, sections 11.2 and 11.3.
+    """
+    length = p.length
+    eps, kappa, c1 = x[0] / p.scale[0], x[1] / p.scale[1], x[2] / p.scale[2]
+    chain_nodes = np.zeros((2, 2))
+    tip = arc_node_jacobian(p, x, 1)[0]
+    chain_nodes[1, 0], chain_nodes[1, 1] = tip[0], tip[1]
+    beta = np.full(1, kappa * length)
+    d = 0.5 * kappa
+    coefficients = np.empty((1, 4))
+    coefficients[0, 0], coefficients[0, 1] = eps, -2.0 * d * d / 3.0
+    coefficients[0, 2], coefficients[0, 3] = c1, d
+    theta = np.zeros(1)
+    if not samples:
+        return (chain_nodes, beta, theta, coefficients, True, np.nan, np.empty((0, 2)),
+                np.empty(0), np.empty((0, 3)))
+    energy = arc_energy(p, x, pressure, nodes, forces)
+    m = p.samples
+    points = np.empty((m, 2))
+    tangent = np.empty(m)
+    strains = np.empty((m, 3))
+    for k in range(m):
+        s = length * k / (m - 1)
+        turn = kappa * s
+        reach = ((1.0 + eps) * s) * _sinc0(turn)
+        points[k, 0] = reach * math.cos(0.5 * turn)
+        points[k, 1] = reach * math.sin(0.5 * turn)
+        tangent[k] = turn
+        strains[k, 0], strains[k, 1], strains[k, 2] = eps, kappa, c1
+    points[m - 1, 0], points[m - 1, 1] = tip[0], tip[1]
+    return chain_nodes, beta, theta, coefficients, True, energy, points, tangent, strains
+
+
 #: The arc's hooks, by the engine's names (`engine.register` takes them).
 ARC_HOOKS = {'derivatives': arc_derivatives, 'energy': arc_energy, 'step': arc_step,
-             'solve_linear': arc_solve_linear, 'node_jacobian': arc_node_jacobian}
+             'solve_linear': arc_solve_linear, 'node_jacobian': arc_node_jacobian,
+             'outputs': arc_outputs}

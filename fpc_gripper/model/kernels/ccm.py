@@ -2,11 +2,12 @@
 
 import collections
 import functools
+import math
 
 import numpy as np
 
 from .chain import (consistent_strain_map_kernel, load_derivatives_kernel, load_energy_kernel,
-                    node_jacobian_kernel)
+                    node_jacobian_kernel, node_positions_kernel)
 from .linear import (_cholesky_substitute, _dense_cholesky, _factored_step, EIGEN_FLOOR,
                      newton_step_blocks)
 from ..compiled import jit
@@ -400,6 +401,70 @@ def ccm_node_jacobian(p, q, node):
     return node_jacobian_kernel(q, p.lengths, node)
 
 
+# -- the outputs of a state ---------------------------------------------------------------
+@_jit
+def _ccm_samples(q, lengths, per_segment, nodes, theta):
+    """
+    CCM midplane samples at x = L_i j/m, j = 0..m-1 of every segment, then the tip.
+
+    Returns points (N m + 1, 2), global (X, Z) [m], and their tangent angles from +X
+    towards +Z (N m + 1,) [rad], from the chain's `nodes` and node angles `theta`.
+
+    References
+    ----------
+    Zhou, Headings, Dapino (2022), eq. (15); SPEC "Derived outputs".
+    """
+    n = q.shape[0]
+    m = per_segment
+    points = np.empty((n * m + 1, 2))
+    tangent = np.empty(n * m + 1)
+    for i in range(n):
+        c, s = math.cos(theta[i]), math.sin(theta[i])
+        b1, b3, d = 1.0 + q[i, 0], q[i, 1], q[i, 3]
+        for j in range(m):
+            xi = j / m
+            u = lengths[i] * (b1 * xi + b3 * xi ** 3)
+            w = lengths[i] * (d * xi ** 2)
+            k = i * m + j
+            points[k, 0] = nodes[i, 0] + (c * u - s * w)
+            points[k, 1] = nodes[i, 1] + (s * u + c * w)
+            tangent[k] = theta[i] + math.atan2(2.0 * d * xi, b1 + 3.0 * b3 * xi ** 2)
+    points[n * m, 0], points[n * m, 1] = nodes[n, 0], nodes[n, 1]
+    tangent[n * m] = theta[n - 1] + math.atan2(2.0 * q[n - 1, 3],
+                                               1.0 + q[n - 1, 0] + 3.0 * q[n - 1, 1])
+    return points, tangent
+
+
+@_jit
+def ccm_outputs(p, q, pressure, nodes, forces, samples):
+    """
+    Return `engine.newton.OUTPUT_FIELDS` of a CCM state q (N, 4) (scaled unknowns).
+
+    It has no strains: (0, 3).
+
+    References
+    ----------
+    Zhou, Headings, Dapino (2022), eqs. (15)-(16); SPEC "Kinematics", "Derived outputs".
+    """
+    chain_nodes, theta, beta = node_positions_kernel(q, p.lengths)
+    n = q.shape[0]
+    coefficients = q.copy()
+    valid = True
+    for i in range(n):
+        length = p.lengths[i]
+        coefficients[i, 1] = q[i, 1] / (length * length)
+        coefficients[i, 3] = q[i, 3] / length
+        if not abs(2.0 * q[i, 3]) < 1.0:
+            valid = False
+    if not samples:
+        return (chain_nodes, beta, theta, coefficients, valid, np.nan, np.empty((0, 2)),
+                np.empty(0), np.empty((0, 3)))
+    points, tangent = _ccm_samples(q, p.lengths, p.per_segment, chain_nodes, theta)
+    return (chain_nodes, beta, theta, coefficients, valid,
+            ccm_energy(p, q, pressure, nodes, forces), points, tangent, np.empty((0, 3)))
+
+
 #: The CCM's hooks, by the engine's names (`engine.register` takes them).
 CCM_HOOKS = {'derivatives': ccm_derivatives, 'energy': ccm_energy, 'step': ccm_step,
-             'solve_linear': ccm_solve_linear, 'node_jacobian': ccm_node_jacobian}
+             'solve_linear': ccm_solve_linear, 'node_jacobian': ccm_node_jacobian,
+             'outputs': ccm_outputs}

@@ -538,8 +538,67 @@ def pcc_point_jacobian(p, x, seg, offset, z):
     return point_jacobian_kernel(x, p.lengths, seg, offset, z)
 
 
+# -- the outputs of a state ---------------------------------------------------------------
+@_jit
+def pcc_outputs(p, x, pressure, nodes, forces, samples):
+    """
+    Return `engine.newton.OUTPUT_FIELDS` of a PCC state x (3 N,), the engine unknowns.
+
+    A sample at sigma into segment i has turned by kappa_i sigma, and its partial chord is
+    (1 + eps_i) sigma S(kappa_i sigma) along the mean tangent: exactly on the arc; the last
+    sample is the tip. coefficients are (eps, -kappa^2/6, c1, kappa/2) [-, 1/m^2, -, 1/m],
+    the CCM's of a segment with the same uniform strain.
+
+    References
+    ----------
+    docs/physics.md, sections 11.4 and 11.6.
+    """
+    lengths = p.lengths
+    n = lengths.size
+    chain_nodes = nodes_kernel(x, lengths)
+    prev = np.empty(n)
+    beta = np.empty(n)
+    kappa = np.empty(n)
+    coefficients = np.empty((n, 4))
+    before = 0.0
+    for i in range(n):
+        eps, c1, theta = x[3 * i], x[3 * i + 1], x[3 * i + 2]
+        prev[i] = before
+        beta[i] = theta - before
+        kappa[i] = beta[i] / lengths[i]
+        coefficients[i, 0] = eps
+        coefficients[i, 1] = -(kappa[i] * kappa[i]) / 6.0
+        coefficients[i, 2] = c1
+        coefficients[i, 3] = 0.5 * kappa[i]
+        before = theta
+    if not samples:
+        return (chain_nodes, beta, prev, coefficients, True, np.nan, np.empty((0, 2)),
+                np.empty(0), np.empty((0, 3)))
+    energy = energy_kernel(x, lengths, p.stiffness, p.gas, p.pemc,
+                           p.pressure_coefficient * pressure, nodes, forces)
+    m = p.sample_segment.size
+    points = np.empty((m, 2))
+    tangent = np.empty(m)
+    strains = np.empty((m, 3))
+    for k in range(m):
+        i = p.sample_segment[k]
+        sigma = p.sample_offset[k]
+        eps = x[3 * i]
+        turn = kappa[i] * sigma
+        half = prev[i] + 0.5 * turn
+        reach = ((1.0 + eps) * sigma) * _sinc0(turn)
+        points[k, 0] = chain_nodes[i, 0] + reach * math.cos(half)
+        points[k, 1] = chain_nodes[i, 1] + reach * math.sin(half)
+        tangent[k] = prev[i] + turn
+        strains[k, 0] = eps
+        strains[k, 1] = kappa[i]
+        strains[k, 2] = x[3 * i + 1]
+    points[m - 1, 0], points[m - 1, 1] = chain_nodes[n, 0], chain_nodes[n, 1]
+    return chain_nodes, beta, prev, coefficients, True, energy, points, tangent, strains
+
+
 #: The PCC's hooks, by the engine's names (`engine.register` takes them).
 PCC_HOOKS = {'derivatives': pcc_derivatives, 'energy': pcc_energy, 'step': pcc_step,
              'solve_linear': pcc_solve_linear, 'node_jacobian': pcc_node_jacobian,
              'point_derivatives': pcc_point_derivatives, 'point_positions': pcc_point_positions,
-             'point_jacobian': pcc_point_jacobian}
+             'point_jacobian': pcc_point_jacobian, 'outputs': pcc_outputs}
