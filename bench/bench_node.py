@@ -114,11 +114,12 @@ class Driver:
         return record
 
     def wait_for_initial_state(self, timeout=60.0):
+        """Send a first command per finger every 0.1 s until each finger's shape has come."""
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
             if all(self.received):
                 return True
-            time.sleep(0.05)
+            self.drive(10.0, 0.1, 'same')
         return False
 
     def drive(self, rate_hz, duration_s, mode, tick0=0):
@@ -168,6 +169,50 @@ def baseline_ms(tolerance):
         state['r'] = r
 
     return median_time(step, repeats=200) * 1e3
+
+
+def solver_us(tolerance, count=600):
+    """
+    In-process solve time per command [us] of the per-command runs' sequence, same run.
+
+    Three fingers, distinct sweeps, each solve warm from that finger's previous answer, as
+    model_node solves them (outputs 'all': the state, samples and circle fit it publishes).
+    """
+    design = load_gripper_config().fingers[0].design
+    solver = finger_model(design, ModelSettings(tolerance=tolerance))
+    last = [solver.solve(command_gauge(0, i, 'distinct')) for i in range(len(FINGERS))]
+    times = []
+    for k in range(1, count + 1):
+        for i in range(len(FINGERS)):
+            t0 = time.perf_counter()
+            last[i] = solver.solve(command_gauge(k, i, 'distinct'), initial=last[i])
+            times.append(time.perf_counter() - t0)
+    return statistics.median(times) * 1e6
+
+
+def per_command_run(driver, model, rate_hz, duration_s, repeats, solve_us):
+    """
+    Node CPU per answered command, and its part outside the solver, at `rate_hz` x 3.
+
+    Distinct commands per finger; the node's rate cap lifted (max_rate_hz 1000). Returns
+    medians over repeats of the node's CPU (fraction of a core), the answered ratio,
+    latency p50/p99 [ms] and CPU per answered command [us].
+    """
+    rows = []
+    tick = 0
+    for _ in range(repeats):
+        sent, elapsed, cpu = measured_drive(driver, model, rate_hz, duration_s, 'distinct',
+                                            tick)
+        tick += len(sent[0])
+        lat, ratio = driver.window(sent)
+        answered = lat.size
+        per_command = cpu['node_cpu'] * elapsed / max(answered, 1) * 1e6
+        rows.append({'node_cpu': cpu['node_cpu'], 'answered_ratio': answered / sum(
+            len(s) for s in sent), 'p50_ms': float(np.percentile(lat, 50)),
+            'p99_ms': float(np.percentile(lat, 99)), 'cpu_per_command_us': per_command,
+            'outside_solver_us': per_command - solve_us})
+    return {key: statistics.median(r[key] for r in rows) for key in rows[0]} | {
+        'rate_hz': rate_hz, 'repeats': rows}
 
 
 def measured_drive(driver, model, rate_hz, duration_s, mode, tick0=0):
@@ -228,7 +273,15 @@ def main(argv=None):
                              "node's default adaptive model")
     parser.add_argument('--output', type=pathlib.Path, default=None,
                         help='default bench/results/node.json, or node_tolerance.json')
+    parser.add_argument('--per-command', action='store_true',
+                        help="issue 22's runs instead: the default model (tolerance 5e-5), "
+                             'max_rate_hz 1000, 3 fingers x 100/200/500 Hz of distinct '
+                             'commands; CPU per answered command and its part outside the '
+                             'solver (bench/results/node_per_command.json)')
     args = parser.parse_args(argv)
+    if args.per_command:
+        args.tolerance = 5e-5
+        args.output = args.output or RESULTS.with_name('node_per_command.json')
     if args.output is None:
         args.output = RESULTS if args.tolerance == 0.0 else \
             RESULTS.with_name('node_tolerance.json')
@@ -236,6 +289,8 @@ def main(argv=None):
         parser.error('run inside the private namespace: scripts/isolated .venv/bin/python '
                      'bench/bench_node.py')
 
+    if args.per_command:
+        return per_command_main(args)
     base = baseline_ms(args.tolerance)
     context = Context()
     rclpy.init(context=context)
@@ -315,5 +370,46 @@ def main(argv=None):
     print(f'wrote {args.output}')
 
 
+def per_command_main(args):
+    """Run issue 22's per-command measurement and write its JSON."""
+    solve = solver_us(args.tolerance)
+    context = Context()
+    rclpy.init(context=context)
+    executor = SingleThreadedExecutor(context=context)
+    spinner = threading.Thread(target=executor.spin, daemon=True)
+    spinner.start()
+    results = {'machine': machine(), 'tolerance_m': args.tolerance, 'solver_us': solve,
+               'executor': os.environ.get('FPC_GRIPPER_EXECUTOR', 'default'),
+               'load_average_before': os.getloadavg(), 'rates': {}}
+    try:
+        model = ModelProcess('/bench_per_command', 1000.0, args.tolerance)
+        driver = Driver(context, '/bench_per_command')
+        executor.add_node(driver.node)
+        try:
+            if not driver.wait_for_initial_state():
+                raise RuntimeError('the model node published no initial state')
+            driver.drive(100.0, 1.0, 'distinct')
+            for rate in (100.0, 200.0, 500.0):
+                results['rates'][str(int(rate))] = per_command_run(
+                    driver, model, rate, args.duration, args.repeats, solve)
+        finally:
+            model.stop()
+    finally:
+        executor.shutdown(timeout_sec=5.0)
+        spinner.join(timeout=5.0)
+        context.try_shutdown()
+    args.output.parent.mkdir(parents=True, exist_ok=True)
+    args.output.write_text(json.dumps(results, indent=2) + '\n')
+    print(f'in-process solve per command: {solve:.0f} us')
+    print(f'{"3 fingers x":<14}{"node CPU":>9}{"answered":>9}{"p50 ms":>8}{"p99 ms":>8}'
+          f'{"CPU/cmd us":>11}{"outside solver us":>18}')
+    for rate, row in results['rates'].items():
+        print(f'{rate + " Hz":<14}{row["node_cpu"]:>9.2f}{row["answered_ratio"]:>9.3f}'
+              f'{row["p50_ms"]:>8.2f}{row["p99_ms"]:>8.2f}{row["cpu_per_command_us"]:>11.0f}'
+              f'{row["outside_solver_us"]:>18.0f}')
+    print(f'wrote {args.output}')
+    return 0
+
+
 if __name__ == '__main__':
-    main()
+    sys.exit(main())
