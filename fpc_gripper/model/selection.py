@@ -188,6 +188,35 @@ _FEATURE_STEP = 5e3
 _FEATURE_CACHE = 256
 
 
+class _Cubic:
+    """
+    A piecewise cubic (scipy's PPoly, as PCHIP builds it) at one point, in plain floats.
+
+    scipy's own call costs 17-19 us, of which the arithmetic is nothing; this one finds the
+    interval as scipy's `find_interval` does (closed on the right at the last breakpoint)
+    and sums the same terms in the same order (its `evaluate_poly1`), so it gives the same
+    bits, in about 1 us.
+    """
+
+    def __init__(self, ppoly):
+        self.x = [float(v) for v in ppoly.x]
+        self.c = [tuple(float(v) for v in column) for column in ppoly.c.T]
+
+    def __call__(self, xval):
+        """Return the cubic at `xval`, a float inside the breakpoints."""
+        x = self.x
+        i = min(max(bisect.bisect_right(x, xval) - 1, 0), len(x) - 2)
+        c0, c1, c2, c3 = self.c[i]
+        s = xval - x[i]
+        res = 0.0 + c3 * 1.0 * 1.0
+        z = s
+        res = res + c2 * z * 1.0
+        z = z * s
+        res = res + c1 * z * 1.0
+        z = z * s
+        return res + c0 * z * 1.0
+
+
 class _ArcFeature:
     """
     The scene feature of `choose_model` for one design: the arc rung's turning |kappa L|.
@@ -207,8 +236,8 @@ class _ArcFeature:
         self.table = None
         if all(x is not None for x in self.states):
             # The turning from the state, as the result's beta[0]: no samples are built.
-            self.table = PchipInterpolator(self.grid, [float(self.arc.turning(self.arc._unpack(x)))
-                                                       for x in self.states])
+            self.table = _Cubic(PchipInterpolator(
+                self.grid, [float(self.arc.turning(self.arc._unpack(x))) for x in self.states]))
         self._loaded = {}
 
     def _table_states(self):
@@ -250,7 +279,7 @@ class _ArcFeature:
     def turning(self, pressure, tip_force):
         """Return |kappa L| of the arc rung [rad]; inf when the arc has no equilibrium."""
         if self._tabled(pressure, tip_force):
-            return abs(float(self.table(pressure)))
+            return abs(self.table(pressure))
         key = (pressure,) + tuple(tip_force)
         if key not in self._loaded:
             out = engine.solve(self.arc.engine_problem, pressure, self.arc.tip_loads(tip_force),
@@ -282,10 +311,8 @@ class _ArcFeature:
         index, starts = [], []
         tabled = [k for k, (p, f) in enumerate(zip(pressures, tip_forces)) if self._tabled(p, f)]
         if tabled:
-            # One call for all: PCHIP evaluates every point exactly as it would alone.
-            values = self.table(np.array([pressures[k] for k in tabled], dtype=float))
-            for k, value in zip(tabled, values):
-                out[k] = abs(float(value))
+            for k in tabled:
+                out[k] = abs(self.table(pressures[k]))
         for k, (pressure, force) in enumerate(zip(pressures, tip_forces)):
             if out[k] is not None:
                 continue

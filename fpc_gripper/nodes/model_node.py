@@ -84,13 +84,33 @@ _INVALID_COLOR = (1.0, 0.55, 0.0, 1.0)
 
 
 class _SlowOutput:
-    """Fingers whose slow output is out of date, sent at most once per `period_s` [s]."""
+    """
+    Fingers whose slow output is out of date, sent at most once per `period_s` [s].
 
-    def __init__(self, period_s, publish):
+    An update is sent at once when a period has passed since the last send; else a timer of
+    its own (steady time, running only while something is out of date) sends it later, so
+    the last update is always sent and nothing polls in between.
+    """
+
+    def __init__(self, node, period_s, publish, clock, lock):
         self.period_s = period_s
         self.publish = publish
         self.dirty = set()
         self.last_ns = None
+        self._lock = lock
+        self.timer = node.create_timer(self._timer_period(), self._on_timer, clock=clock)
+        self.timer.cancel()
+
+    def _timer_period(self):
+        return self.period_s if math.isfinite(self.period_s) else 1.0
+
+    def set_period(self, period_s):
+        """Change the period [s] (inf: never sent)."""
+        if period_s != self.period_s:
+            self.period_s = period_s
+            self.timer.timer_period_ns = int(round(self._timer_period() * 1e9))
+            if not math.isfinite(period_s):
+                self.dirty.clear()
 
     def due(self, now_ns):
         """Whether a period has passed since the last send [ns]."""
@@ -102,6 +122,25 @@ class _SlowOutput:
         indices = sorted(self.dirty)
         self.dirty.clear()
         return indices
+
+    def update(self, indices, now_ns):
+        """Mark fingers out of date and send them if due, else let the timer send them."""
+        if not math.isfinite(self.period_s):
+            return
+        self.dirty.update(indices)
+        if not self.dirty:
+            return
+        if self.due(now_ns):
+            self.publish(self.take(now_ns))
+        elif self.timer.is_canceled():
+            self.timer.reset()
+
+    def _on_timer(self):
+        with self._lock:
+            if self.dirty:
+                self.publish(self.take(time.monotonic_ns()))
+            else:
+                self.timer.cancel()
 
 
 def _parameter_table():
@@ -246,8 +285,10 @@ class ModelNode(Node):
         self._palm_frame = prefix + _PALM_FRAME
         self._placements = tuple(FingerPlacement(config.palm_radius, f.mount_angle)
                                  for f in config.fingers)
-        self._markers = _SlowOutput(_MARKER_PERIOD_S, self._publish_markers)
-        self._rigidities = _SlowOutput(self._rigidity_period(), self._publish_rigidities)
+        self._markers = _SlowOutput(self, _UNWATCHED_MARKER_PERIOD_S, self._publish_markers,
+                                    self._steady, self._lock)
+        self._rigidities = _SlowOutput(self, self._rigidity_period(), self._publish_rigidities,
+                                       self._steady, self._lock)
         self._last_kinds = None
         self._serialize_shapes = None
         self._create_topics(names)
@@ -396,9 +437,7 @@ class ModelNode(Node):
                 self._core.max_rate_hz = values['max_rate_hz']
                 self._rate_timer.timer_period_ns = int(round(1e9 / values['max_rate_hz']))
             if 'rigidity_rate_hz' in values:
-                self._rigidities.period_s = self._rigidity_period()
-                if values['rigidity_rate_hz'] <= 0.0:
-                    self._rigidities.dirty.clear()
+                self._rigidities.set_period(self._rigidity_period())
             if values.keys() & set(_SOLVER_PARAMETERS):
                 self._core.rebuild(self._create_solver)
                 self.get_logger().info(
@@ -454,8 +493,7 @@ class ModelNode(Node):
     def _on_timer(self):
         with self._lock:
             self._run(self._core.ready(time.monotonic_ns()))
-            self._flush_slow_outputs()
-            if not (self._core.pending or self._markers.dirty or self._rigidities.dirty):
+            if not self._core.pending:
                 self._rate_timer.cancel()
 
     def _wake(self):
@@ -482,10 +520,13 @@ class ModelNode(Node):
                     f'({state.tip_force[0]:g}, {state.tip_force[1]:g}) N failed, keeping the '
                     f'last good state: {update.failure}', key=(update.index, 'solver'))
         self._publish_diagnostics()
-        self._markers.dirty.update(u.index for u in good)
-        if math.isfinite(self._rigidities.period_s):
-            self._rigidities.dirty.update(u.index for u in good)
-        self._flush_slow_outputs()
+        indices = [u.index for u in good]
+        now = time.monotonic_ns()
+        watched = (self._markers_pub.get_subscription_count()
+                   or self._gripper_shape_pub.get_subscription_count())
+        self._markers.set_period(_MARKER_PERIOD_S if watched else _UNWATCHED_MARKER_PERIOD_S)
+        self._markers.update(indices, now)
+        self._rigidities.update(indices, now)
 
     def _shape_payload(self, result, frame_id, stamp_ns):
         if self._serialize_shapes is None:
@@ -504,20 +545,6 @@ class ModelNode(Node):
         payload = self._shape_payload(update.result, self._frames[update.index],
                                       update.stamp_ns)
         self._shape_pubs[update.index].publish(payload)
-
-    def _flush_slow_outputs(self):
-        """Send the slow outputs that are due; wake the timer for the rest."""
-        now = time.monotonic_ns()
-        watched = (self._markers_pub.get_subscription_count()
-                   or self._gripper_shape_pub.get_subscription_count())
-        self._markers.period_s = _MARKER_PERIOD_S if watched else _UNWATCHED_MARKER_PERIOD_S
-        for slow in (self._markers, self._rigidities):
-            if not slow.dirty:
-                continue
-            if slow.due(now):
-                slow.publish(slow.take(now))
-            else:
-                self._wake()
 
     def _publish_rigidities(self, indices):
         for index in indices:

@@ -1,5 +1,6 @@
 """The body of every node's main(): spin until SIGINT or SIGTERM, then shut down cleanly."""
 
+import gc
 import os
 import signal
 import socket
@@ -179,6 +180,10 @@ def run_node(build, name, args=None, check=None):
         code = None if check is None else check(node)
         if code is not None:
             return code
+        # Everything built so far (numba's and the model's object graphs among it) lives as
+        # long as the node: out of the collector's sight, a full collection no longer walks
+        # it while messages wait (at 3 x 200 Hz its pauses made the p99 latency).
+        gc.freeze()
         executor, wake = _executor(node)
         waker = _Waker(wake)
         while not stop.requested and rclpy.ok():

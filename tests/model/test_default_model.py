@@ -68,3 +68,17 @@ def test_default_model_meets_its_tolerance_off_the_ladder(designs, prestrain, pr
     rod = RodSolver(design).solve(pressure, force)
     assert result.success and rod.success, (result.message, rod.message)
     assert np.linalg.norm(result.tip - rod.tip) <= DEFAULT_TOLERANCE, result.model_choice
+
+
+def test_the_feature_table_evaluates_as_scipy_does():
+    # The unloaded feature table's cubic (`selection._Cubic`, plain floats) gives scipy's
+    # PCHIP bits at random points, at every breakpoint and at both ends.
+    from scipy.interpolate import PchipInterpolator
+
+    from fpc_gripper.model.selection import _Cubic
+    grid = np.linspace(0.0, 6e5, 121)
+    values = np.sin(grid / 1.7e5) * 2.0 + grid * 1e-6
+    reference = PchipInterpolator(grid, values)
+    cubic = _Cubic(reference)
+    points = np.concatenate([np.random.default_rng(7).uniform(0.0, 6e5, 5000), grid])
+    np.testing.assert_array_equal([cubic(float(p)) for p in points], reference(points))
