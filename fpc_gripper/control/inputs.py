@@ -2,15 +2,15 @@
 
 import math
 
-from fpc_gripper.nodes.input_limits import check_absolute_pressure
-from fpc_gripper.nodes.input_limits import check_frame
-from fpc_gripper.nodes.input_limits import check_tip_force_value
-from fpc_gripper.nodes.input_limits import checked_bounds
-from fpc_gripper.nodes.input_limits import DEFAULT_BOUNDS
-from fpc_gripper.nodes.input_limits import InputCheck
-from fpc_gripper.nodes.input_limits import real_or_none
-from fpc_gripper.nodes.input_limits import Rejection
-from fpc_gripper.nodes.logs import bounded
+from fpc_gripper.services.input_limits import check_absolute_pressure
+from fpc_gripper.services.input_limits import check_frame
+from fpc_gripper.services.input_limits import check_tip_force_value
+from fpc_gripper.services.input_limits import checked_bounds
+from fpc_gripper.services.input_limits import DEFAULT_BOUNDS
+from fpc_gripper.services.input_limits import InputCheck
+from fpc_gripper.services.input_limits import real_or_none
+from fpc_gripper.services.input_limits import Rejection
+from fpc_gripper.services.logs import bounded
 
 from .controller import FingerMeasurement
 

@@ -15,7 +15,8 @@ import time
 from .mcap_reader import McapInputError, Recording, recover, UnknownTopicError
 from .mcap_writer import atomic_mcap_writer, SchemaNotFoundError
 from .messages import (curvature_message, DEFAULT_ATMOSPHERIC_PRESSURE, finger_topic,
-                       MODEL_OUTPUT_TYPES, rigidity_message, serialized_shape, time_to_ns)
+                       MODEL_OUTPUT_TYPES, rigidity_message, serialized_shape, STATE_QOS,
+                       time_to_ns)
 
 __all__ = ['ReplayReport', 'build_parser', 'exact_seconds', 'export_csv', 'file_info', 'main',
            'replay_model']
@@ -319,7 +320,7 @@ def replay_model(in_path, out_path, *, config=None, settings=None, source='auto'
 
     The recorded ``finger_<i>/pressure`` (or ``pressure_command``) and
     ``finger_<i>/tip_force`` messages go, in log-time order, through the same
-    :class:`~fpc_gripper.nodes.model_core.ModelCore` and finger model that
+    :class:`~fpc_gripper.services.model_core.ModelCore` and finger model that
     ``model_node`` runs with the same settings: the same checks (non-finite, below
     vacuum, over the design or gripper limit, wrong frame, stale against the log time),
     the same gauge conversion (the configuration's atmospheric pressure, clipped at 0),
@@ -370,8 +371,7 @@ def replay_model(in_path, out_path, *, config=None, settings=None, source='auto'
     from rclpy.serialization import serialize_message
 
     from ..model.pipeline import finger_model, ModelSettings
-    from ..nodes.model_core import DEFAULT_STALE_AFTER_S, ModelCore
-    from ..nodes.model_node import STATE_QOS
+    from ..services.model_core import DEFAULT_STALE_AFTER_S, ModelCore
 
     settings = ModelSettings() if settings is None else settings
     stale_after_s = DEFAULT_STALE_AFTER_S if stale_after_s is None else stale_after_s
@@ -569,7 +569,7 @@ def build_parser():
                    help='gripper configuration YAML (default: the package default)')
     from ..model import PRESSURE_MODEL_NAMES
     from ..model.pipeline import ModelSettings
-    from ..nodes.model_core import DEFAULT_STALE_AFTER_S
+    from ..services.model_core import DEFAULT_STALE_AFTER_S
     defaults = ModelSettings()
     p.add_argument('--tolerance', type=float, default=defaults.tolerance, metavar='M',
                    help='tip-position tolerance of the finger model against the rod [m], as '

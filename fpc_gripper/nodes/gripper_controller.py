@@ -61,9 +61,6 @@ from fpc_gripper.model import PRESSURE_MODEL_NAMES
 from fpc_gripper.model.pipeline import MAX_SEGMENTS
 from fpc_gripper.model.pipeline import ModelSettings
 from fpc_gripper.nodes.guard import InputGuard
-from fpc_gripper.nodes.input_limits import checked_bounds
-from fpc_gripper.nodes.logs import bounded
-from fpc_gripper.nodes.logs import NodeLog
 from fpc_gripper.nodes.parameters import BOUND_NAMES
 from fpc_gripper.nodes.parameters import declare_table
 from fpc_gripper.nodes.parameters import float_range
@@ -71,6 +68,9 @@ from fpc_gripper.nodes.parameters import input_bound_table
 from fpc_gripper.nodes.parameters import input_bounds
 from fpc_gripper.nodes.parameters import int_range
 from fpc_gripper.nodes.runner import run_node
+from fpc_gripper.services.input_limits import checked_bounds
+from fpc_gripper.services.logs import bounded
+from fpc_gripper.services.logs import NodeLog
 
 __all__ = ['GripperController', 'main']
 

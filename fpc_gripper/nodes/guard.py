@@ -4,10 +4,10 @@ from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.event_handler import UnsupportedEventTypeError
 from rclpy.serialization import deserialize_message
 
-from fpc_gripper.nodes.input_limits import DEFAULT_BOUNDS
-from fpc_gripper.nodes.input_limits import InputCheck
-from fpc_gripper.nodes.input_limits import Rejection
-from fpc_gripper.nodes.logs import bounded
+from fpc_gripper.services.input_limits import DEFAULT_BOUNDS
+from fpc_gripper.services.input_limits import InputCheck
+from fpc_gripper.services.input_limits import Rejection
+from fpc_gripper.services.logs import bounded
 
 __all__ = ['InputGuard', 'decode']
 

@@ -16,7 +16,6 @@ from rcl_interfaces.msg import SetParametersResult
 from rclpy.clock import Clock
 from rclpy.clock import ClockType
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy
 from rclpy.qos import HistoryPolicy
 from rclpy.qos import qos_profile_sensor_data
 from rclpy.qos import QoSProfile
@@ -37,16 +36,12 @@ from fpc_gripper.io.messages import rigidity_message
 from fpc_gripper.io.messages import serialized_shape
 from fpc_gripper.io.messages import shape_marker
 from fpc_gripper.io.messages import shape_message
+from fpc_gripper.io.messages import STATE_QOS
 from fpc_gripper.model import PRESSURE_MODEL_NAMES
 from fpc_gripper.model.pipeline import finger_model
 from fpc_gripper.model.pipeline import MAX_SEGMENTS
 from fpc_gripper.model.pipeline import ModelSettings
 from fpc_gripper.nodes.guard import InputGuard
-from fpc_gripper.nodes.input_limits import checked_bounds
-from fpc_gripper.nodes.logs import NodeLog
-from fpc_gripper.nodes.model_core import DEFAULT_STALE_AFTER_S
-from fpc_gripper.nodes.model_core import Level
-from fpc_gripper.nodes.model_core import ModelCore
 from fpc_gripper.nodes.parameters import BOUND_NAMES
 from fpc_gripper.nodes.parameters import declare_table
 from fpc_gripper.nodes.parameters import float_range
@@ -54,6 +49,11 @@ from fpc_gripper.nodes.parameters import input_bound_table
 from fpc_gripper.nodes.parameters import input_bounds
 from fpc_gripper.nodes.parameters import int_range
 from fpc_gripper.nodes.runner import run_node
+from fpc_gripper.services.input_limits import checked_bounds
+from fpc_gripper.services.logs import NodeLog
+from fpc_gripper.services.model_core import DEFAULT_STALE_AFTER_S
+from fpc_gripper.services.model_core import Level
+from fpc_gripper.services.model_core import ModelCore
 
 PRESSURE_INPUTS = ('command', 'measured')
 # The model settings every consumer of the finger pipeline defaults to.
@@ -62,10 +62,6 @@ _CHOICES = {'pressure_model': PRESSURE_MODEL_NAMES, 'pressure_input': PRESSURE_I
 # Parameters whose change rebuilds the solvers.
 _SOLVER_PARAMETERS = ('n_segments', 'pressure_model', 'tolerance')
 
-# The model's state: a late joiner gets the newest one from the publisher's history.
-STATE_QOS = QoSProfile(depth=1, history=HistoryPolicy.KEEP_LAST,
-                       reliability=ReliabilityPolicy.RELIABLE,
-                       durability=DurabilityPolicy.TRANSIENT_LOCAL)
 _COMMAND_QOS = QoSProfile(depth=10, history=HistoryPolicy.KEEP_LAST,
                           reliability=ReliabilityPolicy.RELIABLE)
 _DIAGNOSTICS_QOS = _COMMAND_QOS
@@ -211,7 +207,7 @@ class ModelNode(Node):
     transient local with depth 1: a late subscriber gets the newest state from the
     publisher's history, and every message answers an input. Bad inputs are rejected and
     a failed solve publishes nothing: each finger keeps its last good state (see
-    :class:`~fpc_gripper.nodes.model_core.ModelCore`). Every input is checked before any
+    :class:`~fpc_gripper.services.model_core.ModelCore`). Every input is checked before any
     solve or serialisation against bounds that are parameters: payload size (checked
     before decoding: inputs are raw subscriptions), header stamp (a valid time, not
     older than ``stale_after_s`` nor more than ``future_limit_s`` ahead of the node
@@ -315,7 +311,7 @@ class ModelNode(Node):
 
     @property
     def core(self):
-        """The ROS-free model state (:class:`~fpc_gripper.nodes.model_core.ModelCore`)."""
+        """The ROS-free model state (:class:`~fpc_gripper.services.model_core.ModelCore`)."""
         return self._core
 
     @property

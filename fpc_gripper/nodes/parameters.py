@@ -4,8 +4,8 @@ import dataclasses
 
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 
-from fpc_gripper.nodes.input_limits import DEFAULT_BOUNDS
-from fpc_gripper.nodes.input_limits import InputBounds
+from fpc_gripper.services.input_limits import DEFAULT_BOUNDS
+from fpc_gripper.services.input_limits import InputBounds
 
 __all__ = ['BOUND_NAMES', 'float_range', 'int_range', 'declare_table', 'input_bound_table',
            'input_bounds']

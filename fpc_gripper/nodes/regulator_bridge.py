@@ -20,7 +20,6 @@ from sensor_msgs.msg import FluidPressure
 from fpc_gripper.io.config import default_gripper_config_path
 from fpc_gripper.io.config import load_gripper_config
 from fpc_gripper.nodes.guard import InputGuard
-from fpc_gripper.nodes.logs import NodeLog
 from fpc_gripper.nodes.parameters import declare_table
 from fpc_gripper.nodes.parameters import float_range
 from fpc_gripper.nodes.parameters import input_bound_table
@@ -36,6 +35,7 @@ from fpc_gripper.regulators.factory import make_backend
 from fpc_gripper.regulators.modbus import RegisterMap
 from fpc_gripper.regulators.safety import SafeState
 from fpc_gripper.safe_yaml import ConfigError
+from fpc_gripper.services.logs import NodeLog
 
 SAFE_STATES = tuple(s.value for s in SafeState)
 

@@ -4,17 +4,17 @@ import dataclasses
 import enum
 import math
 
-from fpc_gripper.nodes.input_limits import check_absolute_pressure
-from fpc_gripper.nodes.input_limits import check_frame
-from fpc_gripper.nodes.input_limits import checked_bounds
-from fpc_gripper.nodes.input_limits import DEFAULT_BOUNDS
-from fpc_gripper.nodes.input_limits import InputCheck
-from fpc_gripper.nodes.input_limits import Rejection
-from fpc_gripper.nodes.logs import bounded
 from fpc_gripper.regulators.base import BackendFault
 from fpc_gripper.regulators.safety import ChannelSupervisor
 from fpc_gripper.regulators.safety import MonotonicTime
 from fpc_gripper.regulators.safety import SupervisorMode
+from fpc_gripper.services.input_limits import check_absolute_pressure
+from fpc_gripper.services.input_limits import check_frame
+from fpc_gripper.services.input_limits import checked_bounds
+from fpc_gripper.services.input_limits import DEFAULT_BOUNDS
+from fpc_gripper.services.input_limits import InputCheck
+from fpc_gripper.services.input_limits import Rejection
+from fpc_gripper.services.logs import bounded
 
 __all__ = ['ChannelReport', 'Level', 'MonitorSettings', 'RegulatorCore', 'Sample', 'StepResult',
            'check_readback']

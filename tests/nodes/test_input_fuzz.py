@@ -28,14 +28,14 @@ from fpc_gripper.io.messages import serialized_shape
 from fpc_gripper.model import CCMSolver
 from fpc_gripper.model.pipeline import ModelSettings
 from fpc_gripper.nodes.guard import decode
-from fpc_gripper.nodes.input_limits import MAX_STAMP_NS
-from fpc_gripper.nodes.input_limits import Rejection
-from fpc_gripper.nodes.logs import NodeLog
-from fpc_gripper.nodes.logs import Severity
-from fpc_gripper.nodes.model_core import ModelCore
 from fpc_gripper.regulators.core import MonitorSettings
 from fpc_gripper.regulators.core import RegulatorCore
 from fpc_gripper.regulators.sim import SimulatedRegulator
+from fpc_gripper.services.input_limits import MAX_STAMP_NS
+from fpc_gripper.services.input_limits import Rejection
+from fpc_gripper.services.logs import NodeLog
+from fpc_gripper.services.logs import Severity
+from fpc_gripper.services.model_core import ModelCore
 
 ATM = 101325.0
 S = 1_000_000_000

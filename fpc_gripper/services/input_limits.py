@@ -9,7 +9,7 @@ from fpc_gripper.model.validation import ArgumentError
 from fpc_gripper.model.validation import check_force
 from fpc_gripper.model.validation import ENVELOPE
 from fpc_gripper.model.validation import InputLimits
-from fpc_gripper.nodes.logs import bounded
+from fpc_gripper.services.logs import bounded
 
 __all__ = ['DEFAULT_BOUNDS', 'InputBounds', 'InputCheck', 'MAX_STAMP_NS', 'MAX_STAMP_SEC',
            'Rejection', 'check_absolute_pressure', 'check_frame', 'check_stamp',

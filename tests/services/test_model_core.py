@@ -9,13 +9,13 @@ from numpy.testing import assert_allclose
 import pytest
 
 from fpc_gripper.model import ActuatorDesign, CCMSolver
-from fpc_gripper.nodes.model_core import check_pressure
-from fpc_gripper.nodes.model_core import check_tip_force
-from fpc_gripper.nodes.model_core import Level
-from fpc_gripper.nodes.model_core import ModelCore
-from fpc_gripper.nodes.model_core import RATE_BURST
-from fpc_gripper.nodes.model_core import Rejection
-from fpc_gripper.nodes.model_core import stale_detail
+from fpc_gripper.services.model_core import check_pressure
+from fpc_gripper.services.model_core import check_tip_force
+from fpc_gripper.services.model_core import Level
+from fpc_gripper.services.model_core import ModelCore
+from fpc_gripper.services.model_core import RATE_BURST
+from fpc_gripper.services.model_core import Rejection
+from fpc_gripper.services.model_core import stale_detail
 
 ATM = 101325.0
 NAMES = ('finger_0', 'finger_1', 'finger_2')
@@ -430,7 +430,7 @@ def test_settings_are_checked(name, value, text):
 
 
 def test_core_imports_without_rclpy():
-    code = ('import sys; import fpc_gripper.nodes.model_core; '
+    code = ('import sys; import fpc_gripper.services.model_core; '
             'bad = [m for m in sys.modules if m.split(".")[0] in '
             '("rclpy", "rosidl_runtime_py", "std_msgs")]; '
             'assert not bad, bad')

@@ -10,16 +10,16 @@ from sensor_msgs.msg import FluidPressure
 
 from fpc_gripper.model.validation import ENVELOPE, InputLimits
 from fpc_gripper.nodes.guard import decode
-from fpc_gripper.nodes.input_limits import check_absolute_pressure
-from fpc_gripper.nodes.input_limits import check_frame
-from fpc_gripper.nodes.input_limits import check_stamp
-from fpc_gripper.nodes.input_limits import check_tip_force_value
-from fpc_gripper.nodes.input_limits import InputBounds
-from fpc_gripper.nodes.input_limits import MAX_STAMP_NS
-from fpc_gripper.nodes.input_limits import Rejection
-from fpc_gripper.nodes.logs import bounded
-from fpc_gripper.nodes.logs import NodeLog
-from fpc_gripper.nodes.logs import Severity
+from fpc_gripper.services.input_limits import check_absolute_pressure
+from fpc_gripper.services.input_limits import check_frame
+from fpc_gripper.services.input_limits import check_stamp
+from fpc_gripper.services.input_limits import check_tip_force_value
+from fpc_gripper.services.input_limits import InputBounds
+from fpc_gripper.services.input_limits import MAX_STAMP_NS
+from fpc_gripper.services.input_limits import Rejection
+from fpc_gripper.services.logs import bounded
+from fpc_gripper.services.logs import NodeLog
+from fpc_gripper.services.logs import Severity
 
 ATM = 101325.0
 S = 1_000_000_000

@@ -1,0 +1,1 @@
+"""ROS-free services below the nodes: the model service, the input checks, log helpers."""
