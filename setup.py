@@ -61,6 +61,8 @@ setup(
             'regulator_bridge = fpc_gripper.nodes.regulator_bridge:main',
             'mcap_recorder = fpc_gripper.nodes.mcap_recorder:main',
             'gripper_controller = fpc_gripper.nodes.gripper_controller:main',
+            'gripper = fpc_gripper.nodes.gripper:main',
+            'virtual_object = fpc_gripper.nodes.virtual_object:main',
             'gripper_demo = fpc_gripper.nodes.gripper_demo:main',
             'fpc-mcap = fpc_gripper.io.cli:main',
             'fpc-calibrate = fpc_gripper.calibration.cli:main',

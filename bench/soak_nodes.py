@@ -19,10 +19,10 @@ from rclpy.qos import QoSProfile
 from rclpy.qos import ReliabilityPolicy
 from std_msgs.msg import String
 
-from fpc_gripper.nodes.gripper_demo import VirtualObjectNode
 from fpc_gripper.nodes.regulator_bridge import _activation_exit_code
 from fpc_gripper.nodes.regulator_bridge import RegulatorBridge
 from fpc_gripper.nodes.runner import run_node
+from fpc_gripper.nodes.virtual_object import VirtualObjectNode
 
 FAULT_TOPIC = 'soak/regulator_fault'
 _FAULT_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)

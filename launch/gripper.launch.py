@@ -4,7 +4,7 @@ Launch the gripper: regulator_bridge, model_node and gripper_controller (and mca
     ros2 launch fpc_gripper gripper.launch.py [backend:=sim|modbus] [modbus_config:=FILE]
         [namespace:=NS] [gripper_config:=FILE] [params_file:=FILE] [record:=true]
         [record_path:=FILE_OR_DIR] [use_sim_time:=true] [frame_prefix:=PREFIX]
-        [autostart:=true|false]
+        [autostart:=true|false] [composed:=true|false]
 
 The regulator bridge is a lifecycle node. With autostart (the default) it configures and
 activates itself as it starts (auto_activate), in its own process: no round trip through
@@ -12,7 +12,10 @@ its lifecycle services, whose discovery took about 2 s of the start-up; a config
 cannot activate ends it with exit code 2 (invalid) or 1 (device unreachable), which launch
 reports. autostart:=false starts it unconfigured, for a lifecycle manager or ``ros2
 lifecycle set``. Every node reads share/fpc_gripper/config/<node>.yaml, then
-params_file, then the launch arguments. Nothing is imported from launch until
+params_file, then the launch arguments. composed:=true starts the same nodes as one
+process, the ``gripper`` executable (one executor: no DDS hop between them, one
+interpreter's memory); its parameter files are the same, and its launch-argument values
+reach the nodes that declare them. Nothing is imported from launch until
 generate_launch_description() runs, so the file imports without launch installed.
 """
 
@@ -23,31 +26,44 @@ def generate_launch_description():
     from launch.actions import OpaqueFunction
     from launch_ros.actions import LifecycleNode, Node
 
-    from fpc_gripper.launch_support import arguments, node_parameters
+    from fpc_gripper.launch_support import arguments, config_file, node_parameters
 
     def nodes(context):
         value = context.launch_configurations.get
         namespace = value('namespace', '')
         autostart = value('autostart', 'true').lower() in ('true', '1', 'yes')
+        record = value('record', 'false').lower() in ('true', '1', 'yes')
+        bridge = node_parameters(context, 'regulator_bridge', backend=value('backend'),
+                                 modbus_config=value('modbus_config') or None,
+                                 auto_activate=autostart)
+        recorder = node_parameters(context, 'mcap_recorder', frames=False,
+                                   output_path=value('record_path') or None)
+        if value('composed', 'false').lower() in ('true', '1', 'yes'):
+            names = ('regulator_bridge', 'model_node', 'gripper_controller')
+            files = [str(config_file(n)) for n in names + (('mcap_recorder',) if record else ())]
+            # One dict for the process (launch_ros keys it /**): each value reaches the
+            # nodes that declare the parameter, and only those. No name: a __node remap
+            # would rename every node of the process.
+            shared = {**bridge[-1], **node_parameters(context, 'model_node')[-1]}
+            if record:
+                shared.update(recorder[-1])
+            return [Node(package='fpc_gripper', executable='gripper', namespace=namespace,
+                         output='screen', arguments=['--record'] if record else [],
+                         parameters=files + bridge[1:-1] + [shared])]
         actions = [
             LifecycleNode(
                 package='fpc_gripper', executable='regulator_bridge', name='regulator_bridge',
-                namespace=namespace, output='screen',
-                parameters=node_parameters(context, 'regulator_bridge', backend=value('backend'),
-                                           modbus_config=value('modbus_config') or None,
-                                           auto_activate=autostart)),
+                namespace=namespace, output='screen', parameters=bridge),
             Node(package='fpc_gripper', executable='model_node', name='model_node',
                  namespace=namespace, output='screen',
                  parameters=node_parameters(context, 'model_node')),
             Node(package='fpc_gripper', executable='gripper_controller',
                  name='gripper_controller', namespace=namespace, output='screen',
                  parameters=node_parameters(context, 'gripper_controller'))]
-        if value('record', 'false').lower() in ('true', '1', 'yes'):
+        if record:
             actions.append(Node(
                 package='fpc_gripper', executable='mcap_recorder', name='mcap_recorder',
-                namespace=namespace, output='screen',
-                parameters=node_parameters(context, 'mcap_recorder', frames=False,
-                                           output_path=value('record_path') or None)))
+                namespace=namespace, output='screen', parameters=recorder))
         return actions
 
     return LaunchDescription(arguments((
@@ -58,5 +74,7 @@ def generate_launch_description():
         ('record_path', '', 'Recording file (*.mcap) or bag directory; default '
          'fpc_gripper_<date>.mcap in the working directory.'),
         ('autostart', 'true', 'Configure and activate the regulator bridge.',
+         ('true', 'false')),
+        ('composed', 'false', 'Run the nodes in one process (the gripper executable).',
          ('true', 'false')),
     )) + [OpaqueFunction(function=nodes)])

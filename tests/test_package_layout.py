@@ -160,7 +160,7 @@ def test_launch_files_import_without_launch(prefix, name):
 @pytest.mark.parametrize('name, arguments', [
     ('gripper.launch.py', ['namespace', 'gripper_config', 'params_file', 'use_sim_time',
                            'frame_prefix', 'backend', 'modbus_config', 'record', 'record_path',
-                           'autostart']),
+                           'autostart', 'composed']),
     ('model.launch.py', ['namespace', 'gripper_config', 'params_file', 'use_sim_time',
                          'frame_prefix', 'pressure_input']),
 ])

@@ -1,182 +1,38 @@
 """Scripted gripper session in one process: open, grasp a virtual object, hold, release."""
 
 import argparse
-import collections
 from dataclasses import dataclass, field
-import functools
 import math
 import pathlib
-import struct
 import sys
 import time
 
 from diagnostic_msgs.msg import DiagnosticStatus
-from geometry_msgs.msg import WrenchStamped
-from nav_msgs.msg import Path
-from rcl_interfaces.msg import ParameterDescriptor
 import rclpy
 from rclpy.executors import ExternalShutdownException
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import HistoryPolicy
-from rclpy.qos import qos_profile_sensor_data
 from rclpy.qos import QoSProfile
 from rclpy.qos import ReliabilityPolicy
 from rclpy.task import Future
-from rclpy.utilities import remove_ros_args
-from sensor_msgs.msg import FluidPressure
 from std_msgs.msg import Float64
 
-from fpc_gripper.control.virtual_object import VirtualObject
-from fpc_gripper.grasp.objects import make_object
 from fpc_gripper.grasp.objects import OBJECTS
 from fpc_gripper.io.config import default_gripper_config_path
 from fpc_gripper.io.config import load_gripper_config
 from fpc_gripper.io.messages import gripper_topics
-from fpc_gripper.nodes.parameters import float_range
+from fpc_gripper.io.session_chart import make_chart
+from fpc_gripper.io.session_chart import message_count
+from fpc_gripper.nodes.gripper import bridge_exit_code
+from fpc_gripper.nodes.gripper import compose
+from fpc_gripper.nodes.runner import make_executor
+from fpc_gripper.nodes.runner import own_arguments
 
-__all__ = ['Phase', 'SessionScript', 'VirtualObjectNode', 'main', 'make_chart', 'run_session']
+__all__ = ['Phase', 'SessionScript', 'main', 'run_session']
 
 _RELIABLE = QoSProfile(depth=10, history=HistoryPolicy.KEEP_LAST,
                        reliability=ReliabilityPolicy.RELIABLE)
-
-
-class VirtualObjectNode(Node):
-    """
-    A virtual object in the palm: publishes ``finger_<i>/tip_force`` for every finger.
-
-    On each measured pressure ``finger_<i>/pressure`` it solves that finger's contact with
-    the object (:class:`fpc_gripper.control.virtual_object.VirtualObject`: frictionless,
-    along the whole finger, on the contact model) and publishes its resultant as a
-    WrenchStamped in frame ``finger_<i>``: force.x, force.z the contact force on the
-    finger [N], torque.y its moment about the fingertip [N m] (the wrench at the tip
-    equivalent to the contact loads). It also reads the tip of the model node's
-    ``finger_<i>/shape`` and records, while in contact, its distance from the contact
-    model's tip (`residuals`): how far the model node's tip-force finger is from the
-    finger in contact. Shapes are taken raw and only the tip is decoded (a 129-pose Path
-    costs milliseconds as Python objects).
-
-    Parameters
-    ----------
-    node_name : str
-    **kwargs
-        Passed to :class:`rclpy.node.Node`.
-
-    """
-
-    def __init__(self, node_name='virtual_object', **kwargs):
-        super().__init__(node_name, **kwargs)
-        positive = float_range(1e-3, 0.5)
-        self.declare_parameter('gripper_config', str(default_gripper_config_path()),
-                               ParameterDescriptor(description='Gripper YAML.', read_only=True))
-        self.declare_parameter('object', 'cylinder', ParameterDescriptor(
-            description='cylinder (coaxial with the palm axis), sphere (centred on it) or box '
-                        '(D x D section, across the palm).', read_only=True,
-            additional_constraints=f'one of {list(OBJECTS)}'))
-        self.declare_parameter('object_diameter', 0.040, ParameterDescriptor(
-            description='Object size D [m].', read_only=True, floating_point_range=positive))
-        self.declare_parameter('object_height', 0.0, ParameterDescriptor(
-            description="Height of the object's lowest point above the palm [m].",
-            read_only=True, floating_point_range=float_range(0.0, 0.5)))
-        self.declare_parameter('method', 'exact', ParameterDescriptor(
-            description="'exact' (rigid) or 'penalty' (compliant, stiffness_n_m).",
-            read_only=True, additional_constraints="one of ['exact', 'penalty']"))
-        self.declare_parameter('stiffness_n_m', 200.0, ParameterDescriptor(
-            description='Surface stiffness of the penalty method [N/m].', read_only=True,
-            floating_point_range=float_range(1.0, 1e6)))
-        self.declare_parameter('atmospheric_pressure', 101325.0, ParameterDescriptor(
-            description='[Pa]: gauge = absolute - atmospheric_pressure.',
-            floating_point_range=float_range(3e4, 1.2e5)))
-        param = self.get_parameter
-        config = load_gripper_config(param('gripper_config').value)
-        method = param('method').value
-        if method not in ('exact', 'penalty'):
-            raise ValueError(f"`method` must be 'exact' or 'penalty', got {method!r}")
-        self._names = config.names
-        self._palm_radius = config.palm_radius
-        self.object = make_object(param('object').value, param('object_diameter').value,
-                                  param('object_height').value)
-        self.exact = method == 'exact'
-        self.virtual = VirtualObject(self.object, config, penalty=0.0 if self.exact
-                                     else param('stiffness_n_m').value)
-        self.contacts = [None] * len(self._names)
-        self.residuals = collections.deque(maxlen=100000)
-        self._pubs = tuple(self.create_publisher(WrenchStamped, f'{n}/tip_force', _RELIABLE)
-                           for n in self._names)
-        for i, name in enumerate(self._names):
-            self.create_subscription(FluidPressure, f'{name}/pressure',
-                                     functools.partial(self._on_pressure, i),
-                                     qos_profile_sensor_data)
-            self.create_subscription(Path, f'{name}/shape', functools.partial(self._on_shape, i),
-                                     _RELIABLE, raw=True)
-        self.get_logger().info(
-            f'{param("object").value} D = {param("object_diameter").value * 1e3:.1f} mm '
-            f'({method}); the free fingers touch it below '
-            f'{self.virtual.touch_pressure:.0f} Pa gauge')
-
-    @property
-    def forces(self):
-        """Latest normal force on every finger [N] (0 before any contact)."""
-        return [0.0 if c is None else c.normal_force for c in self.contacts]
-
-    def arcs(self):
-        """Latest contact arc (start, end) [m] of every finger, or None."""
-        return [None if c is None else c.arc for c in self.contacts]
-
-    def _on_pressure(self, index, msg):
-        gauge = msg.fluid_pressure - self.get_parameter('atmospheric_pressure').value
-        if not math.isfinite(gauge):
-            return
-        try:
-            contact = self.virtual.contact(index, max(gauge, 0.0))
-        except (RuntimeError, ValueError, ArithmeticError) as exc:
-            # No contact force can be given for this pressure: publish none, so the model
-            # node keeps the last one it had.
-            self.get_logger().error(f'{self._names[index]}: no contact at {gauge:.0f} Pa '
-                                    f'gauge: {exc}', throttle_duration_sec=2.0)
-            return
-        self.contacts[index] = contact
-        out = WrenchStamped()
-        out.header.stamp = self.get_clock().now().to_msg()
-        out.header.frame_id = self._names[index]
-        out.wrench.force.x, out.wrench.force.z = contact.force
-        out.wrench.torque.y = contact.torque
-        self._pubs[index].publish(out)
-
-    def _on_shape(self, index, data):
-        contact = self.contacts[index]
-        if contact is None or not contact.in_contact or not self.exact:
-            return
-        z = _path_tip_z(data)
-        if z is None:
-            return
-        self.residuals.append((self.get_clock().now().nanoseconds * 1e-9,
-                               abs(z - contact.tip[1])))
-
-    def residual(self, start, end):
-        """Largest |Z_tip(model node) - Z_tip(contact)| of the shapes in [start, end] [m]."""
-        return max((r for t, r in self.residuals if start <= t <= end), default=math.nan)
-
-
-def _path_tip_z(data):
-    """
-    Z of the last pose of a serialized nav_msgs/Path, or None.
-
-    The CDR payload ends with the last pose: position (x, y, z) then orientation
-    (x, y, z, w), eight little- or big-endian doubles aligned to 8 bytes, so z is the
-    fifth double from the end.
-    """
-    if len(data) < 20 or data[0] != 0 or data[1] not in (0, 1):
-        return None
-    order = '<' if data[1] == 1 else '>'
-    # Payload (after the 4-byte encapsulation): stamp (8), frame_id (uint32 length + bytes),
-    # then the uint32 pose count aligned to 4 from the payload start.
-    offset = 16 + struct.unpack_from(order + 'I', data, 12)[0]
-    offset += -(offset - 4) % 4
-    if offset + 4 > len(data) or struct.unpack_from(order + 'I', data, offset)[0] == 0:
-        return None
-    return struct.unpack(order + 'd', data[-40:-32])[0]
 
 
 @dataclass
@@ -350,7 +206,11 @@ def default_phases(open_aperture=0.120, grasp_force=1.5, hold_s=3.0):
 def run_session(output_dir, object_diameter=0.040, grasp_force=1.5, open_aperture=0.120,
                 hold_s=3.0, context=None, gripper_config=None, obj='cylinder', mu=0.5):
     """
-    Build every node on one executor, run the session and close the recording.
+    Run the composed gripper (`fpc_gripper.nodes.gripper.compose`) and the session script.
+
+    The nodes are the ones the ``gripper`` executable runs with ``--record
+    --virtual-object``, on the same executor, with the demo's parameters on top of
+    their defaults.
 
     Parameters
     ----------
@@ -368,11 +228,6 @@ def run_session(output_dir, object_diameter=0.040, grasp_force=1.5, open_apertur
         mcap path, message count, contact residual [m], wall time [s], max command [Pa].
 
     """
-    from fpc_gripper.nodes.gripper_controller import GripperController
-    from fpc_gripper.nodes.mcap_recorder import McapRecorder
-    from fpc_gripper.nodes.model_node import ModelNode
-    from fpc_gripper.nodes.regulator_bridge import RegulatorBridge
-
     output_dir = pathlib.Path(output_dir)
     output_dir.mkdir(parents=True, exist_ok=True)
     mcap_path = output_dir / 'session.mcap'
@@ -380,43 +235,41 @@ def run_session(output_dir, object_diameter=0.040, grasp_force=1.5, open_apertur
     config = load_gripper_config(config_path)
     common = {'context': context} if context is not None else {}
     cfg = Parameter('gripper_config', value=config_path)
-    wall = time.monotonic()
-    nodes = []
-    executor = SingleThreadedExecutor(**common)
-    try:
-        nodes.append(RegulatorBridge.create_active(parameter_overrides=[
-            cfg, Parameter('backend', value='sim'), Parameter('publish_rate_hz', value=50.0)],
-            **common))
+    described = [Parameter('object', value=obj),
+                 Parameter('object_diameter', value=float(object_diameter))]
+    topics = [t for t in gripper_topics(config.names) if not t.endswith('/rigidity')]
+    overrides = {
+        'regulator_bridge': [cfg, Parameter('backend', value='sim'),
+                             Parameter('publish_rate_hz', value=50.0)],
         # Default model settings throughout: the model node, the controller's inverse and
-        # the virtual object all compute the finger through the same pipeline.
-        # No rigidity: K_x and K_z take two more solves per new pressure, and the session
+        # the virtual object all compute the finger through the same pipeline. No
+        # rigidity: K_x and K_z take two more solves per new pressure, and the session
         # does not use them.
-        nodes.append(ModelNode(parameter_overrides=[
-            cfg, Parameter('pressure_input', value='measured'),
-            Parameter('max_rate_hz', value=10.0), Parameter('rigidity_rate_hz', value=0.0)],
-            **common))
-        described = [Parameter('object', value=obj),
-                     Parameter('object_diameter', value=float(object_diameter))]
+        'model_node': [cfg, Parameter('pressure_input', value='measured'),
+                       Parameter('max_rate_hz', value=10.0),
+                       Parameter('rigidity_rate_hz', value=0.0)],
         # The controller is told the object, as a robot is by its perception.
-        nodes.append(GripperController(parameter_overrides=[cfg, *described], **common))
-        virtual = VirtualObjectNode(parameter_overrides=[cfg, *described], **common)
-        nodes.append(virtual)
-        topics = [t for t in gripper_topics(config.names) if not t.endswith('/rigidity')]
-        recorder = McapRecorder(parameter_overrides=[
-            Parameter('output_path', value=str(mcap_path)), Parameter('overwrite', value=True),
-            Parameter('topics', value=topics), Parameter('discovery_period_s', value=0.2),
-            Parameter('gripper_config', value=config_path)], **common)
-        nodes.append(recorder)
+        'gripper_controller': [cfg, *described],
+        'virtual_object': [cfg, *described],
+        'mcap_recorder': [Parameter('output_path', value=str(mcap_path)),
+                          Parameter('overwrite', value=True), Parameter('topics', value=topics),
+                          Parameter('discovery_period_s', value=0.2), cfg]}
+    wall = time.monotonic()
+    nodes = compose(record=True, virtual_object=True, overrides=overrides, **common)
+    by_name = {node.get_name(): node for node in nodes}
+    recorder, virtual = by_name['mcap_recorder'], by_name['virtual_object']
+    controller = by_name['gripper_controller']
+    executor = None
+    try:
+        if bridge_exit_code(nodes) is not None:
+            raise RuntimeError('the regulator bridge did not activate (its log says why)')
         script = SessionScript(default_phases(open_aperture, grasp_force, hold_s),
                                grasp_force, arcs=virtual.arcs, **common)
         nodes.append(script)
-        controller = nodes[2]
-        for node in nodes:
-            executor.add_node(node)
+        executor, _ = make_executor(nodes)
         budget = 30.0 + sum(p.timeout for p in script.phases)
         executor.spin_until_future_complete(script.done, timeout_sec=budget)
-        max_command = controller.max_command_seen if hasattr(
-            controller, 'max_command_seen') else math.nan
+        max_command = getattr(controller, 'max_command_seen', math.nan)
         recorder.close()
         for phase in script.phases:
             if phase.kind == 'hold' and phase.reached:
@@ -424,7 +277,7 @@ def run_session(output_dir, object_diameter=0.040, grasp_force=1.5, open_apertur
                              if k.endswith('command_pa')]
                 phase.holding = virtual.virtual.holding_force(
                     sum(pressures) / len(pressures), mu).holding_force
-        info = {'mcap': mcap_path, 'messages': recorder_count(mcap_path),
+        info = {'mcap': mcap_path, 'messages': message_count(mcap_path),
                 'contact_residual': max((virtual.residual(p.start, p.end)
                                          for p in script.phases if p.kind == 'hold'),
                                         default=math.nan),
@@ -432,108 +285,10 @@ def run_session(output_dir, object_diameter=0.040, grasp_force=1.5, open_apertur
                 'max_pressure': config.max_pressure}
         return script.phases, info
     finally:
+        if executor is not None:
+            executor.shutdown()
         for node in reversed(nodes):
-            executor.remove_node(node)
             node.destroy_node()
-        executor.shutdown()
-
-
-def recorder_count(path):
-    """Message count of a closed MCAP file (0 if it cannot be read)."""
-    from fpc_gripper.io.mcap_reader import McapFile
-    try:
-        with McapFile(path) as mcap:
-            return mcap.message_count
-    except Exception:  # noqa: BLE001 - reported as 0 messages in the summary
-        return 0
-
-
-def _series(mcap_path, atmospheric):
-    """Read the charted topics from the recording: dict of name -> (t [s], values)."""
-    from fpc_gripper.io.mcap_reader import McapFile
-    data = {}
-    start = None
-    with McapFile(mcap_path) as mcap:
-        wanted = [t for t in mcap.topics if t.endswith(
-            ('/pressure', '/pressure_command', '/curvature', '/tip_force', '/aperture'))]
-        for rec in mcap.messages(topics=wanted):
-            start = rec.log_time if start is None else start
-            msg = rec.ros_msg
-            if rec.topic.endswith('/tip_force'):
-                value = math.hypot(msg.wrench.force.x, msg.wrench.force.z)
-            elif rec.topic.endswith(('/pressure', '/pressure_command')):
-                value = (msg.fluid_pressure - atmospheric) * 1e-3
-            else:
-                value = msg.data
-            t, v = data.setdefault(rec.topic, ([], []))
-            t.append(rec.log_time * 1e-9)
-            v.append(value)
-    return data
-
-
-def make_chart(mcap_path, png_path, phases, grasp_force, atmospheric=101325.0):
-    """
-    Chart aperture, pressures, curvatures and contact forces against time from the MCAP.
-
-    Parameters
-    ----------
-    mcap_path : path-like
-        The session recording.
-    png_path : path-like
-        The chart to write.
-    phases : list of Phase
-        Drawn as shaded spans.
-    grasp_force : float
-        Total normal force goal [N]; its share per finger is drawn as a reference line.
-    atmospheric : float
-        Subtracted from the absolute pressures [Pa].
-
-    """
-    import matplotlib
-    matplotlib.use('Agg')
-    import matplotlib.pyplot as plt
-
-    data = _series(mcap_path, atmospheric)
-    t0 = min((t[0] for t, _ in data.values() if t), default=0.0)
-    fig, axes = plt.subplots(4, 1, figsize=(11, 11), sharex=True)
-    rows = [('/aperture', 'aperture [mm]', 1e3), ('pressure', 'pressure [kPa gauge]', 1.0),
-            ('/curvature', 'curvature [1/m]', 1.0), ('/tip_force', 'contact force |F| [N]', 1.0)]
-    for ax, (suffix, label, scale) in zip(axes, rows):
-        for topic in sorted(data):
-            t, v = data[topic]
-            if suffix == 'pressure':
-                if not topic.endswith(('/pressure', '/pressure_command')):
-                    continue
-                style = '--' if topic.endswith('command') else '-'
-                name = topic.strip('/').replace('/pressure_command', ' command').replace(
-                    '/pressure', ' measured')
-                ax.plot([x - t0 for x in t], v, style, lw=1.0, label=name)
-            elif topic.endswith(suffix):
-                ax.plot([x - t0 for x in t], [x * scale for x in v], lw=1.2,
-                        label=topic.strip('/').split('/')[0] if suffix != '/aperture'
-                        else 'model estimate')
-        ax.set_ylabel(label)
-        ax.grid(True, alpha=0.3)
-    share = grasp_force / max(1, sum(t.endswith('/tip_force') for t in data))
-    axes[3].axhline(share, color='k', ls=':', lw=1, label=f'goal per finger {share:.3g} N')
-    for phase in phases:
-        if math.isfinite(phase.start):
-            end = phase.end if math.isfinite(phase.end) else phase.start
-            for ax in axes:
-                ax.axvspan(phase.start - t0, end - t0, alpha=0.06,
-                           color='tab:green' if phase.reached else 'tab:red')
-            axes[0].text(phase.start - t0, axes[0].get_ylim()[1], f' {phase.name}',
-                         va='top', fontsize=9)
-            if phase.kind == 'aperture':
-                axes[0].hlines(phase.value * 1e3, phase.start - t0, end - t0, colors='k',
-                               linestyles=':', lw=1)
-    for ax in axes:
-        ax.legend(fontsize=7, ncol=3, loc='upper right')
-    axes[-1].set_xlabel('time [s]')
-    fig.suptitle('fpc_gripper scripted session (simulated regulator, virtual object)')
-    fig.tight_layout()
-    fig.savefig(png_path, dpi=90)
-    plt.close(fig)
 
 
 def _arc_text(arc):
@@ -569,7 +324,9 @@ def format_summary(phases, info):
 
 def main(args=None):
     """Run the scripted session; exit 0 only if every phase reached its goal."""
-    argv = remove_ros_args(sys.argv if args is None else args)
+    argv = own_arguments(args, 'gripper_demo')
+    if argv is None:
+        return 1
     parser = argparse.ArgumentParser(prog='gripper_demo', description=__doc__)
     parser.add_argument('--output-dir', default='.', help='writes session.mcap and session.png')
     parser.add_argument('--object', default='cylinder', choices=OBJECTS,

@@ -4,6 +4,7 @@ import gc
 import os
 import signal
 import socket
+import sys
 import threading
 import time
 
@@ -14,10 +15,12 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.impl.implementation_singleton import rclpy_implementation
 from rclpy.logging import get_logger
 from rclpy.signals import SignalHandlerOptions
+from rclpy.utilities import remove_ros_args
 
 from fpc_gripper.safe_yaml import ConfigError
 
-__all__ = ['EXECUTOR_ENV', 'FORCE_AFTER_S', 'START_ERRORS', 'StopRequest', 'run_node']
+__all__ = ['EXECUTOR_ENV', 'FORCE_AFTER_S', 'START_ERRORS', 'StopRequest', 'make_executor',
+           'own_arguments', 'run_node']
 
 #: Set to ``single`` for rclpy's SingleThreadedExecutor instead of its EventsExecutor.
 EXECUTOR_ENV = 'FPC_GRIPPER_EXECUTOR'
@@ -106,9 +109,9 @@ class _Waker:
         self._read.close()
 
 
-def _executor(node):
+def make_executor(nodes):
     """
-    Return the executor of `node`, and a thread-safe call that wakes it.
+    Return an executor spinning `nodes`, and a thread-safe call that wakes it.
 
     rclpy's EventsExecutor (the Jazzy wheel's ``rclpy.experimental``) when it is there:
     it waits on rcl's events instead of rebuilding the wait set on every spin, which was
@@ -116,23 +119,41 @@ def _executor(node):
     woken by its own `wake`. Else (or with ``FPC_GRIPPER_EXECUTOR=single``) the
     SingleThreadedExecutor, woken by a guard condition.
     """
+    context = nodes[0].context
+    executor = None
     if os.environ.get(EXECUTOR_ENV, 'events') != 'single':
         try:
             from rclpy.experimental import EventsExecutor
         except ImportError:
             pass
         else:
-            executor = EventsExecutor(context=node.context)
-            executor.add_node(node)
-            return executor, executor.wake
-    executor = SingleThreadedExecutor(context=node.context)
-    executor.add_node(node)
-    return executor, node.create_guard_condition(lambda: None).trigger
+            executor = EventsExecutor(context=context)
+            wake = executor.wake
+    if executor is None:
+        executor = SingleThreadedExecutor(context=context)
+        wake = nodes[0].create_guard_condition(lambda: None).trigger
+    for node in nodes:
+        executor.add_node(node)
+    return executor, wake
+
+
+def own_arguments(args, name):
+    """
+    Return the command line without its ROS arguments, or None when those do not parse.
+
+    For a program with options of its own, before `run_node`: rcl's complaint (say a
+    ``-p`` rule it cannot read) becomes one fatal log line under `name`, not a traceback.
+    """
+    try:
+        return remove_ros_args(sys.argv if args is None else args)
+    except RCLError as exc:
+        get_logger(name).fatal(f'cannot start: {exc}')
+        return None
 
 
 def run_node(build, name, args=None, check=None):
     """
-    Build a node, spin it until SIGINT or SIGTERM, then destroy it and shut rclpy down.
+    Build a node (or several), spin until SIGINT or SIGTERM, destroy them, shut rclpy down.
 
     rclpy's own signal handlers are not installed: they shut the context down from
     another thread while a callback may still be publishing, and then raise
@@ -145,13 +166,14 @@ def run_node(build, name, args=None, check=None):
     Parameters
     ----------
     build : callable
-        ``build()`` returns the node; called after ``rclpy.init``.
+        ``build()`` returns the node, or a list of nodes for one executor (destroyed in
+        reverse order); called after ``rclpy.init``.
     name : str
         Logger name for a failed start.
     args : list of str, optional
         Command-line arguments for ``rclpy.init`` (default ``sys.argv``).
     check : callable, optional
-        ``check(node)`` after the build returns an exit code when the node must not spin
+        ``check(built)`` after the build returns an exit code when it must not spin
         (it has logged why), or None.
 
     Returns
@@ -165,11 +187,13 @@ def run_node(build, name, args=None, check=None):
     stop = StopRequest()
     for signum in _STOP_SIGNALS:
         signal.signal(signum, stop)
-    node = executor = waker = None
+    built = executor = waker = None
+    nodes = ()
     try:
         try:
             rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
-            node = build()
+            built = build()
+            nodes = tuple(built) if isinstance(built, (list, tuple)) else (built,)
         except ConfigError as exc:
             get_logger(name).fatal(f'invalid config: {exc}')
             return 2
@@ -177,14 +201,14 @@ def run_node(build, name, args=None, check=None):
             # RCLError: rcl refused the command line (say a --params-file it cannot parse).
             get_logger(name).fatal(f'cannot start: {exc}')
             return 1
-        code = None if check is None else check(node)
+        code = None if check is None else check(built)
         if code is not None:
             return code
         # Everything built so far (numba's and the model's object graphs among it) lives as
         # long as the node: out of the collector's sight, a full collection no longer walks
         # it while messages wait (at 3 x 200 Hz its pauses made the p99 latency).
         gc.freeze()
-        executor, wake = _executor(node)
+        executor, wake = make_executor(nodes)
         waker = _Waker(wake)
         while not stop.requested and rclpy.ok():
             executor.spin_once(timeout_sec=SPIN_TIMEOUT_S)
@@ -200,7 +224,7 @@ def run_node(build, name, args=None, check=None):
             waker.close()
         if executor is not None:
             executor.shutdown()
-        if node is not None:
+        for node in reversed(nodes):
             node.destroy_node()
         rclpy.try_shutdown()
         # The process ends now. A repeat of the stop signal that comes during the

@@ -26,8 +26,8 @@ from fpc_gripper.model.contact import solve_contact
 from fpc_gripper.model.discretisations.pcc import PCCSolver
 from fpc_gripper.model.pipeline import contact_segments, ModelSettings
 from fpc_gripper.nodes.gripper_controller import GripperController
-from fpc_gripper.nodes.gripper_demo import VirtualObjectNode
 from fpc_gripper.nodes.regulator_bridge import RegulatorBridge
+from fpc_gripper.nodes.virtual_object import VirtualObjectNode
 from fpc_gripper.regulators.sim import SimulatedRegulator
 
 pytestmark = pytest.mark.ros

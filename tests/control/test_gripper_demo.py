@@ -14,7 +14,8 @@ import pytest
 
 from fpc_gripper.io.cli import replay_model
 from fpc_gripper.io.config import load_gripper_config
-from fpc_gripper.nodes.gripper_demo import _path_tip_z, recorder_count
+from fpc_gripper.io.session_chart import message_count
+from fpc_gripper.nodes.virtual_object import _path_tip_z
 
 ATM = 101325.0
 ROOT = pathlib.Path(__file__).resolve().parents[2]
@@ -40,7 +41,7 @@ def test_demo_session_passes_and_records(tmp_path):
     png = tmp_path / 'session.png'
     assert png.read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
     # rosbags, a second reader, decodes every message of the recording.
-    decoded, count = len(read_with_rosbags(tmp_path / 'session.mcap')), recorder_count(
+    decoded, count = len(read_with_rosbags(tmp_path / 'session.mcap')), message_count(
         tmp_path / 'session.mcap')
     print(f'rosbags decoded {decoded} of {count} messages of session.mcap')
     assert decoded == count > 1000
@@ -82,7 +83,7 @@ def assert_replay_reproduces_the_published_shapes(tmp_path):
     """replay-model on the recorded inputs gives the shapes model_node published, to 1e-9 m."""
     replayed = tmp_path / 'replayed.mcap'
     replay_model(tmp_path / 'session.mcap', replayed, source='pressure', rigidity=False)
-    decoded, count = len(read_with_rosbags(replayed)), recorder_count(replayed)
+    decoded, count = len(read_with_rosbags(replayed)), message_count(replayed)
     print(f'rosbags decoded {decoded} of {count} messages of replayed.mcap')
     assert decoded == count > 1000
     published = shapes_by_stamp(tmp_path / 'session.mcap')

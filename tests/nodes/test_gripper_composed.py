@@ -1,0 +1,171 @@
+"""The composed gripper: its nodes, their parameters, one process end to end, its exit codes."""
+
+import pathlib
+import signal
+import subprocess
+import sys
+import threading
+import time
+
+from diagnostic_msgs.msg import DiagnosticStatus
+from helpers import read_with_rosbags
+from nav_msgs.msg import Path
+import pytest
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.parameter import Parameter
+from std_msgs.msg import Float64
+
+from fpc_gripper.nodes import gripper
+from fpc_gripper.nodes.gripper import compose
+from fpc_gripper.nodes.gripper import NODE_NAMES
+
+ROOT = pathlib.Path(__file__).resolve().parents[2]
+CONFIG = ROOT / 'config'
+#: Hang guard for a start (a cold interpreter and its imports), not a timing.
+STARTUP_S = 120.0
+
+
+@pytest.fixture
+def context():
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    yield context
+    context.try_shutdown()
+
+
+@pytest.mark.ros
+def test_compose_builds_each_node_once_with_its_own_parameters(context):
+    nodes = compose(virtual_object=True, context=context, overrides={
+        'model_node': [Parameter('max_rate_hz', value=37.0), Parameter('tolerance', value=1e-4)],
+        'gripper_controller': [Parameter('max_pressure', value=250e3)]})
+    try:
+        assert [n.get_name() for n in nodes] == ['regulator_bridge', 'model_node',
+                                                 'virtual_object', 'gripper_controller']
+        by_name = {n.get_name(): n for n in nodes}
+        # An override reaches its node only: the controller declares a tolerance too, and
+        # keeps config/gripper_controller.yaml's default.
+        model, controller = by_name['model_node'], by_name['gripper_controller']
+        assert model.get_parameter('max_rate_hz').value == pytest.approx(37.0)
+        assert model.get_parameter('tolerance').value == pytest.approx(1e-4)
+        assert controller.get_parameter('tolerance').value == pytest.approx(5e-5)
+        assert controller.get_parameter('max_pressure').value == pytest.approx(250e3)
+        # The bridge activates itself, as the regulator_bridge executable's does.
+        assert by_name['regulator_bridge'].lifecycle_state == 'active'
+        assert gripper.bridge_exit_code(nodes) is None
+    finally:
+        for node in reversed(nodes):
+            node.destroy_node()
+
+
+def test_compose_refuses_an_override_for_a_node_it_does_not_build():
+    with pytest.raises(ValueError, match=r'`overrides` names nodes compose does not build: '
+                                         r"\['model'\]"):
+        compose(overrides={'model': []})
+
+
+def test_compose_destroys_what_it_built_when_a_node_fails(monkeypatch):
+    events = []
+
+    class Fake:
+        def __init__(self, name):
+            self.name = name
+            events.append(('built', name))
+
+        def destroy_node(self):
+            events.append(('destroyed', self.name))
+
+    def failing(**kwargs):
+        raise ValueError('`max_pressure` must be at most 400000 Pa, got 5e+05 Pa')
+
+    builders = {name: (lambda name=name, **kw: Fake(name)) for name in NODE_NAMES}
+    builders['model_node'] = failing
+    monkeypatch.setattr(gripper, '_builders', lambda: builders)
+    with pytest.raises(ValueError, match='max_pressure'):
+        compose(record=True)
+    assert events == [('built', 'regulator_bridge'), ('destroyed', 'regulator_bridge')]
+
+
+def _gripper_process(tmp_path, *args):
+    return subprocess.Popen([sys.executable, '-m', 'fpc_gripper.nodes.gripper', *args],
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                            cwd=tmp_path)
+
+
+@pytest.mark.ros
+def test_the_gripper_executable_runs_the_loop_in_one_process(context, tmp_path):
+    """Goal in, shapes out, Ctrl-C twice: exit 0 and a closed recording of every node."""
+    namespace = '/composed'
+    recording = tmp_path / 'composed.mcap'
+    # Each node's section reaches that node only, in the namespace too.
+    ours = tmp_path / 'params.yaml'
+    ours.write_text(f'/**/mcap_recorder:\n  ros__parameters:\n    output_path: {recording}\n'
+                    '    flush_period_s: 0.2\n'
+                    '/**/model_node:\n  ros__parameters:\n    max_rate_hz: 50.0\n')
+    params = [arg for name in ('regulator_bridge', 'model_node', 'gripper_controller',
+                               'mcap_recorder')
+              for arg in ('--params-file', str(CONFIG / f'{name}.yaml'))]
+    process = _gripper_process(
+        tmp_path, '--record', '--virtual-object', '--ros-args', '-r', f'__ns:={namespace}',
+        *params, '--params-file', str(ours))
+    output = []
+    reader = threading.Thread(target=lambda: output.extend(process.stdout), daemon=True)
+    reader.start()
+    probe = rclpy.create_node('composed_probe', context=context)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(probe)
+    shapes, states = [], []
+    probe.create_subscription(Path, f'{namespace}/finger_0/shape', shapes.append, 10)
+    probe.create_subscription(DiagnosticStatus, f'{namespace}/controller_state',
+                              states.append, 10)
+    goal = probe.create_publisher(Float64, f'{namespace}/aperture_command', 10)
+    try:
+        deadline = time.monotonic() + STARTUP_S
+        while not (shapes and states):
+            assert time.monotonic() < deadline, ''.join(output)
+            assert process.poll() is None, ''.join(output)
+            goal.publish(Float64(data=0.1))
+            executor.spin_once(timeout_sec=0.2)
+        names = set(probe.get_node_names())
+        assert {'regulator_bridge', 'model_node', 'gripper_controller', 'virtual_object',
+                'mcap_recorder'} <= names
+        process.send_signal(signal.SIGINT)
+        time.sleep(0.030)
+        process.send_signal(signal.SIGINT)
+        code = process.wait(timeout=60)
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.wait()
+        reader.join(timeout=5)
+        executor.shutdown()
+        probe.destroy_node()
+    log = ''.join(output)
+    assert code == 0, log
+    assert 'Traceback' not in log, log
+    # Every node's topics went through the one process's recorder: the controller's
+    # commands, the bridge's pressures, the object's forces and the model's shapes.
+    topics = {topic for topic, *_ in read_with_rosbags(recording)}
+    for suffix in ('pressure_command', 'pressure', 'tip_force', 'shape', 'curvature'):
+        assert f'{namespace}/finger_0/{suffix}' in topics, sorted(topics)
+    assert 'closed' in log and ' 0 dropped' in log, log
+
+
+@pytest.mark.ros
+def test_a_bridge_that_cannot_activate_ends_the_process_with_2(tmp_path):
+    run = subprocess.run([sys.executable, '-m', 'fpc_gripper.nodes.gripper', '--ros-args',
+                          '-p', 'regulator_bridge:backend:=modbus'],
+                         capture_output=True, text=True, timeout=STARTUP_S, cwd=tmp_path)
+    assert run.returncode == 2, run.stderr
+    assert 'modbus_config' in run.stderr and 'Traceback' not in run.stderr
+
+
+def test_ros_arguments_rcl_cannot_parse_end_the_process_with_1(tmp_path):
+    # rcl's -p rule takes a node name without slashes.
+    run = subprocess.run([sys.executable, '-m', 'fpc_gripper.nodes.gripper', '--ros-args',
+                          '-p', '/ns/model_node:max_rate_hz:=50.0'],
+                         capture_output=True, text=True, timeout=STARTUP_S, cwd=tmp_path)
+    assert run.returncode == 1, run.stderr
+    assert "cannot start: Failed to parse ROS arguments: Couldn't parse parameter override " \
+        "rule: '-p /ns/model_node:max_rate_hz:=50.0'" in run.stderr
+    assert 'Traceback' not in run.stderr
