@@ -1,5 +1,7 @@
 """GripperController with real rclpy nodes: simulated regulator, virtual object, faults."""
 
+import collections
+import functools
 import itertools
 import math
 import time
@@ -13,10 +15,13 @@ import pytest
 import rclpy
 from rclpy.exceptions import ParameterException
 from rclpy.executors import SingleThreadedExecutor
+from rclpy.executors import TimeoutException
 from rclpy.parameter import Parameter
 from rclpy.qos import qos_profile_sensor_data
 from rclpy.qos import QoSProfile
 from rclpy.qos import ReliabilityPolicy
+from rclpy.time import Time
+from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import FluidPressure
 from std_msgs.msg import Float64
 
@@ -36,13 +41,20 @@ ATM = 101325.0
 CONFIG = load_gripper_config()
 FINGERS = CONFIG.names
 RADIUS = CONFIG.palm_radius
-#: Settling time stated for an aperture step in the ROS loop (message stamps) [s]. The
-#: deterministic ROS-free test holds the law to 1.5 s; this leaves room for scheduling.
+#: Settling time stated for an aperture step in the ROS loop [s of loop time, the bridge's
+#: stamps]. The deterministic ROS-free test holds the law to 1.5 s; the ROS loop's own
+#: delays (a period from the bridge's reading to the controller's step and another from its
+#: command to the regulator) come on top.
 SETTLING_S = 2.5
-#: Feedback timeout of rigs that do not test feedback loss [s] (the default is 0.5 s).
-RIG_FEEDBACK_TIMEOUT_S = 3.0
-#: Feedback timeout of the tests of feedback loss [s]: above any stall of the rig's thread.
-FEEDBACK_LOSS_S = 2.0
+#: Feedback timeout of the tests of feedback loss [s of loop time]. The other rigs keep the
+#: node's default: in loop time a stalled test process ages no reading.
+FEEDBACK_LOSS_S = 0.3
+#: Loop time of the first /clock [ns]: not 0, the time a node reads before any /clock (and
+#: that the input checks take for a clock that has not started).
+START_NS = 100 * 10 ** 9
+#: Wall time one step may take before the rig is taken for hung [s]: a guard against a
+#: deadlock, not a judgement of the loop (a step takes milliseconds, loaded or not).
+HANG_S = 60.0
 _counter = itertools.count()
 
 
@@ -66,25 +78,48 @@ def stamp_s(msg):
 
 
 class Rig:
-    """Nodes under test plus a probe that commands them and records what they publish."""
+    """
+    Nodes under test plus a probe that commands them, records what they publish, owns /clock.
+
+    Every node runs on simulated time (``use_sim_time``) from the probe's ``/clock``, which
+    `step` advances by one control period, and only once every node has handled the last:
+    the control law, the bridge's supervisors and simulated regulator, the feedback and
+    command timeouts all run in loop time. A loaded machine then makes a test slower, never
+    different. `backend`, when given, builds the bridge's backend from ``clock=`` (the
+    loop time [s]).
+    """
 
     def __init__(self, ros, bridge=True, virtual_object=None, backend=None, **params):
         self.context, self.executor = ros
         self.ns = f'/gc{next(_counter)}'
+        self.time_ns = START_NS
+        sim = Parameter('use_sim_time', value=True)
         common = {'namespace': self.ns, 'context': self.context}
         self.nodes = []
+        self.bridge = None
         if bridge:
-            self.nodes.append(RegulatorBridge.create_active(backend=backend, **common))
+            self.bridge = RegulatorBridge.create_active(
+                backend=None if backend is None else backend(clock=self.now),
+                parameter_overrides=[sim], **common)
+            self.nodes.append(self.bridge)
         self.controller = GripperController(
-            parameter_overrides=[Parameter(k, value=v) for k, v in params.items()], **common)
+            parameter_overrides=[sim, *(Parameter(k, value=v) for k, v in params.items())],
+            **common)
         self.nodes.append(self.controller)
+        self.period_ns = round(1e9 / self.controller.get_parameter('control_rate_hz').value)
+        if bridge:
+            # One step is one period of both loops, so each runs once a step.
+            assert round(1e9 / self.bridge.get_parameter('publish_rate_hz').value) \
+                == self.period_ns
         if virtual_object is not None:
             self.virtual = VirtualObjectNode(parameter_overrides=[
-                Parameter('object_diameter', value=virtual_object)], **common)
+                sim, Parameter('object_diameter', value=virtual_object)], **common)
             self.nodes.append(self.virtual)
-        self.probe = rclpy.create_node(f'probe{next(_counter)}', **common)
+        self.probe = rclpy.create_node(f'probe{next(_counter)}', parameter_overrides=[sim],
+                                       **common)
         self.nodes.append(self.probe)
         reliable = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+        self.clock_pub = self.probe.create_publisher(Clock, '/clock', reliable)
         self.measured = {n: [] for n in FINGERS}
         self.commands = {n: [] for n in FINGERS}
         self.tip_forces = {n: [] for n in FINGERS}
@@ -111,12 +146,15 @@ class Rig:
                               for n in FINGERS}
         for node in self.nodes:
             self.executor.add_node(node)
-        self.spin_until(lambda: self.states and self.aperture_pub.get_subscription_count()
-                        and self.force_pub.get_subscription_count())
-        if bridge:
-            # A goal sent before the bridge's readings flow ages past feedback_timeout_s and
-            # vents (a fresh clone's CI did): the tests start from a live bridge.
-            self.spin_until(lambda: all(len(self.measured[n]) >= 2 for n in FINGERS))
+        # Loop time must not run while a path of the rig is still unmatched (a message sent
+        # then is lost); in one process they match at once.
+        self._spin_until(self._matched, "the rig's topics did not match", timeout=15.0)
+        self._publish_clock()
+        self._spin_until(self._synced, 'the nodes did not take the first /clock',
+                         retry=self._publish_clock)
+        self._drain()
+        self.advance_until(lambda: self.states and (not bridge or all(
+            len(self.measured[n]) >= 2 for n in FINGERS)), 1.0, 'the rig answers')
 
     def _on_diag(self, msg):
         for status in msg.status:
@@ -124,22 +162,86 @@ class Rig:
                 self.diagnostics.append(status)
 
     def now(self):
-        return self.probe.get_clock().now().nanoseconds * 1e-9
+        """Loop time [s]: the last /clock."""
+        return self.time_ns * 1e-9
 
-    def spin_until(self, condition, timeout=15.0, every=None):
-        deadline = time.monotonic() + timeout
+    # -- loop time --------------------------------------------------------------------------
+
+    def step(self, every=None):
+        """
+        Advance loop time by one control period; return once every node has handled it.
+
+        `every` (the probe's own inputs of the period) runs first. The step is over once
+        every node's clock reads the new time, the controller's state of the step has
+        arrived, and a wait finds no callback ready: with every node in this process, a
+        message is in its reader's queue when publish returns, so nothing is in flight.
+        """
+        if every is not None:
+            every()
+        answered = len(self.states)
+        self.time_ns += self.period_ns
+        self._publish_clock()
+        self._spin_until(self._synced, 'a node did not take the /clock',
+                         retry=self._publish_clock)
+        self._spin_until(lambda: len(self.states) > answered, 'the controller did not step')
+        self._drain()
+
+    def advance(self, seconds, every=None):
+        """Advance loop time by `seconds` [s], step by step."""
+        for _ in range(round(seconds * 1e9 / self.period_ns)):
+            self.step(every)
+
+    def advance_until(self, condition, within, what, every=None):
+        """Step until `condition` holds; fail when `within` [s] of loop time pass first."""
+        end = self.time_ns + round(within * 1e9)
         while not condition():
-            assert time.monotonic() < deadline, 'condition not met in time'
-            if every is not None:
-                every()
+            assert self.time_ns < end, f'{what}: not within {within} s of loop time'
+            self.step(every)
+
+    def _publish_clock(self):
+        self.clock_pub.publish(Clock(clock=Time(nanoseconds=self.time_ns).to_msg()))
+
+    def _synced(self):
+        return all(node.get_clock().now().nanoseconds == self.time_ns for node in self.nodes)
+
+    def _matched(self):
+        """True once every publisher of the rig has matched the rig's readers of its topic."""
+        readers = collections.Counter(
+            sub.topic_name for node in self.nodes for sub in node.subscriptions)
+        return all(pub.get_subscription_count() >= readers[pub.topic_name]
+                   for node in self.nodes for pub in node.publishers)
+
+    def _spin_until(self, condition, what, timeout=HANG_S, retry=None):
+        """Run callbacks until `condition` holds (a hang guard in wall time, no judgement)."""
+        deadline = time.monotonic() + timeout
+        resend = time.monotonic() + 0.1
+        while not condition():
+            now = time.monotonic()
+            assert now < deadline, f'{what} in {timeout} s of wall time: the rig hangs'
+            if retry is not None and now > resend:
+                # /clock is best effort: a lost sample is sent again (the same time).
+                retry()
+                resend = now + 0.1
             self.executor.spin_once(timeout_sec=0.01)
 
-    def spin_for(self, seconds, every=None):
-        end = time.monotonic() + seconds
-        while time.monotonic() < end:
-            if every is not None:
-                every()
-            self.executor.spin_once(timeout_sec=0.01)
+    def _drain(self):
+        """Run callbacks until a wait finds none ready."""
+        deadline = time.monotonic() + HANG_S
+        ran = True
+        while ran:
+            assert time.monotonic() < deadline, f'still busy after {HANG_S} s of wall time'
+            ran = False
+            while True:
+                try:
+                    handler, _, _ = self.executor.wait_for_ready_callbacks(timeout_sec=0.0)
+                except TimeoutException:
+                    break       # the end of one wait's callbacks
+                handler()
+                if handler.exception() is not None:
+                    raise handler.exception()
+                ran = True
+
+    # -- the tests' vocabulary --------------------------------------------------------------
 
     def state(self):
         return {kv.key: kv.value for kv in self.states[-1].values}
@@ -148,10 +250,12 @@ class Rig:
         (self.aperture_pub if kind == 'aperture' else self.force_pub).publish(
             Float64(data=float(value)))
         key = 'aperture_target_m' if kind == 'aperture' else 'force_target_n'
-        self.spin_until(lambda: abs(float(self.state()[key]) - value) < 1e-6, timeout=5.0)
+        self.advance_until(lambda: abs(float(self.state()[key]) - value) < 1e-6, 1.0,
+                           f'the {kind} goal taken')
 
-    def wait_reached(self, timeout=10.0):
-        self.spin_until(lambda: self.state()['goal_status'] == 'reached', timeout=timeout)
+    def wait_reached(self, within=10.0):
+        self.advance_until(lambda: self.state()['goal_status'] == 'reached', within,
+                           'goal reached')
 
     def samples(self, since):
         """Measured gauge pressures grouped by bridge stamp: (t, (n,) pressures)."""
@@ -178,10 +282,6 @@ def rig(ros):
     rigs = []
 
     def make(**kwargs):
-        # Every node of the rig shares one thread, so any stall of the test process (a
-        # collection, a compile) ages all readings at once. Tests of other behaviour must
-        # not read that as lost feedback; the fault tests set their own timeout.
-        kwargs.setdefault('feedback_timeout_s', RIG_FEEDBACK_TIMEOUT_S)
         rigs.append(Rig(ros, **kwargs))
         return rigs[-1]
 
@@ -218,10 +318,10 @@ def test_aperture_step_settles_within_1_mm_without_overshoot(rig, solver):
     r = rig()
     r.goal('aperture', 0.040)
     r.wait_reached()
-    r.spin_for(0.3)
+    r.advance(0.3)
     start = r.now()
     r.goal('aperture', 0.100)
-    r.spin_for(SETTLING_S + 1.0)
+    r.advance(SETTLING_S + 1.0)
     t, pressures = r.samples(start)
     aperture = independent_apertures(solver, pressures)
     settle, overshoot = settle_and_overshoot(t, aperture, start, 0.040, 0.100)
@@ -246,8 +346,7 @@ def test_tip_force_step_is_rejected(rig, solver):
             pub.publish(force)
 
     start = r.now()
-    push()
-    r.spin_for(SETTLING_S + 1.0, every=push)
+    r.advance(SETTLING_S + 1.0, every=push)
     t, pressures = r.samples(start)
     aperture = independent_apertures(solver, pressures, p0=0.15)
     assert np.abs(aperture - 0.080).max() > 2e-3           # the step did push the tips out
@@ -257,20 +356,20 @@ def test_tip_force_step_is_rejected(rig, solver):
 
 
 def test_lost_pressure_feedback_vents_and_reports_error(rig):
-    backend = SimulatedRegulator(len(FINGERS), seed=1)
-    # Not 0.3 s: the rig runs every node on one thread, and a fresh clone's loaded CI
-    # stalled it for 1 s before the fault, which aged the readings past 0.3 s.
-    r = rig(backend=backend, feedback_timeout_s=FEEDBACK_LOSS_S, safe_state='vent')
+    r = rig(backend=functools.partial(SimulatedRegulator, len(FINGERS), seed=1),
+            feedback_timeout_s=FEEDBACK_LOSS_S, safe_state='vent')
     r.goal('aperture', 0.100)
-    # Until the command has risen, not for a fixed wall time (a loaded machine is slower).
-    r.spin_until(lambda: bool(r.commands[FINGERS[0]])
-                 and r.commands[FINGERS[0]][-1].fluid_pressure > ATM + 100.0e3)
+    r.advance_until(lambda: bool(r.commands[FINGERS[0]])
+                    and r.commands[FINGERS[0]][-1].fluid_pressure > ATM + 100.0e3,
+                    5.0, 'the command rises')
     assert r.state()['mode'] == 'aperture'
-    backend.inject_fault('disconnect')       # the bridge can no longer read any channel
-    r.spin_until(lambda: r.state()['mode'] == 'safe', timeout=FEEDBACK_LOSS_S + 5.0)
-    r.spin_for(0.05)
+    r.bridge.backend.inject_fault('disconnect')    # the bridge can no longer read any channel
+    lost = r.now()
+    r.advance_until(lambda: r.state()['mode'] == 'safe', FEEDBACK_LOSS_S + 0.1, 'safe state')
+    assert r.now() - lost >= FEEDBACK_LOSS_S                # not before the timeout
+    r.advance(0.05)
     count = len(r.commands[FINGERS[0]])
-    r.spin_for(0.3)
+    r.advance(0.3)
     assert r.states[-1].level == DiagnosticStatus.ERROR
     assert any(s.level == DiagnosticStatus.ERROR and 'feedback lost' in s.message
                for s in r.diagnostics)
@@ -290,18 +389,33 @@ def test_lost_pressure_feedback_holds_when_asked(rig):
         return bool(sent) and sent[-1].fluid_pressure > ATM + 100.0e3
 
     r.goal('aperture', 0.100)
-    # Fed until the command has risen (on a loaded machine that takes more than the 0.6 s
-    # of wall time it takes here idle), then not at all.
-    r.spin_until(pressurised, timeout=15.0, every=feed)
-    r.spin_until(lambda: r.state()['mode'] == 'safe', timeout=FEEDBACK_LOSS_S + 5.0)
+    # Fed until the command has risen, then not at all.
+    r.advance_until(pressurised, 5.0, 'the command rises', every=feed)
+    lost = r.now()
+    r.advance_until(lambda: r.state()['mode'] == 'safe', FEEDBACK_LOSS_S + 0.1, 'safe state')
+    assert r.now() - lost >= FEEDBACK_LOSS_S                # not before the timeout
     count = len(r.commands[FINGERS[0]])
     held = r.commands[FINGERS[0]][-1].fluid_pressure
-    r.spin_for(0.3)
+    r.advance(0.3)
     assert r.states[-1].level == DiagnosticStatus.ERROR
     after = r.commands[FINGERS[0]][count:]
     # Exact: 'hold' republishes the stored command, the same double every time.
     assert len(after) > 5 and all(m.fluid_pressure == held for m in after)
     assert ATM + 100.0e3 < held <= ATM + CONFIG.max_pressure     # held, not vented
+
+
+def test_a_stalled_test_process_ages_no_reading(rig):
+    # What failed the wall-clock versions of these tests on a loaded machine: the process
+    # stalls for longer than the feedback timeout. No loop time passes meanwhile, so the
+    # loop carries on; a node that read a wall clock would go safe here.
+    r = rig(feedback_timeout_s=FEEDBACK_LOSS_S)
+    r.goal('aperture', 0.100)
+    count = len(r.states)
+    r.advance(0.2)
+    time.sleep(2 * FEEDBACK_LOSS_S)
+    r.advance(0.2)
+    assert r.state()['mode'] == 'aperture'
+    assert all(s.level == DiagnosticStatus.OK for s in r.states[count:])
 
 
 def test_grasp_on_a_virtual_object_reaches_the_total_normal_force(rig):
@@ -310,9 +424,9 @@ def test_grasp_on_a_virtual_object_reaches_the_total_normal_force(rig):
     r.goal('aperture', 0.100)
     r.wait_reached()
     r.goal('grasp', force)
-    r.wait_reached(timeout=12.0)
+    r.wait_reached(within=12.0)
     start = r.now()
-    r.spin_for(1.0)
+    r.advance(1.0)
     _, pressures = r.samples(start)
     assert pressures.shape[0] > 20
     # Independent: a contact model built here, at the measured pressures: 0.5 N a finger.
