@@ -11,6 +11,8 @@
 # each measured pressure with the contact force on the finger). The bridge runs through
 # bench/soak_nodes.py, which adds a fault hook into its simulated backend. --rate sets the
 # bridge's publish_rate_hz, the controller's control_rate_hz and model_node's max_rate_hz.
+# --composed runs them all in one process instead, as the `gripper` executable does with
+# --record --virtual-object (through soak_nodes.py too, for the fault hook).
 #
 # This process drives and watches the graph through one probe node:
 # - grasp cycles: an aperture goal (open, 100-120 mm), then a grasp-force goal (1-2 N
@@ -95,10 +97,11 @@ FORCE_RANGE = (1.0, 2.0)
 READY_TEXT = {'mcap_recorder': 'recording', 'regulator_bridge': 'active:',
               'model_node': 'waiting for pressure input', 'virtual_object': 'touch it below',
               'gripper_controller': 'ready:'}
+READY_TEXT['gripper'] = tuple(READY_TEXT.values())
 #: Stop order: the controller first (its commands end, the bridge's watchdog vents), the
 #: recorder last, so it records everything the others sent.
-STOP_ORDER = ('gripper_controller', 'virtual_object', 'model_node', 'regulator_bridge',
-              'mcap_recorder')
+STOP_ORDER = ('gripper', 'gripper_controller', 'virtual_object', 'model_node',
+              'regulator_bridge', 'mcap_recorder')
 #: Stamped topics (per finger) whose messages the probe and the recording must agree on.
 COMPARED = ('pressure_command', 'shape')
 STOP_TIMEOUT_S = 30.0
@@ -174,7 +177,9 @@ class NodeProcess:
 
     def ready(self):
         """Whether the node logged that it is up."""
-        return READY_TEXT[self.name] in self.log_text()
+        texts = READY_TEXT[self.name]
+        log = self.log_text()
+        return all(text in log for text in ((texts,) if isinstance(texts, str) else texts))
 
     def poll(self):
         """Exit code once the process ended, else None."""
@@ -207,11 +212,27 @@ class NodeProcess:
         return self.exit_code
 
 
-def node_commands(rate, seed, mcap_path, config_path):
-    """Return the command line of every node, keyed by name (the recorder first)."""
+def node_commands(rate, seed, mcap_path, config_path, composed=False):
+    """Return the command line of every node process, keyed by name (the recorder first)."""
     py = sys.executable
     gripper = ['-p', f'gripper_config:={config_path}']
     obj = ['-p', f'object:={OBJECT[0]}', '-p', f'object_diameter:={OBJECT[1]}']
+    if composed:
+        # The same parameters, each -p rule named after its node (no namespace here).
+        def rules(node, *pairs):
+            return [arg for pair in pairs for arg in ('-p', f'{node}:{pair}')]
+
+        files = [arg for name in ('mcap_recorder', 'regulator_bridge', 'model_node',
+                                  'gripper_controller')
+                 for arg in ('--params-file', CONFIG / f'{name}.yaml')]
+        return {'gripper': [
+            py, BENCH / 'soak_nodes.py', 'gripper', '--ros-args', *files, *gripper,
+            *rules('mcap_recorder', f'output_path:={mcap_path}', 'overwrite:=true'),
+            *rules('regulator_bridge', f'publish_rate_hz:={rate}', f'sim_seed:={seed}'),
+            *rules('model_node', f'max_rate_hz:={rate}'),
+            *rules('virtual_object', f'object:={OBJECT[0]}', f'object_diameter:={OBJECT[1]}'),
+            *rules('gripper_controller', f'control_rate_hz:={rate}', f'object:={OBJECT[0]}',
+                   f'object_diameter:={OBJECT[1]}')]}
 
     def params(name):
         return ['--ros-args', '--params-file', CONFIG / f'{name}.yaml', *gripper]
@@ -946,7 +967,7 @@ class Soak:
 
     def start_nodes(self):
         commands = node_commands(self.args.rate, self.args.seed, self.mcap_path,
-                                 self.config_path)
+                                 self.config_path, composed=self.args.composed)
         for name, argv in commands.items():
             self.procs[name] = NodeProcess(name, argv, self.workdir / f'{name}.log')
         deadline = time.monotonic() + self.args.startup_timeout
@@ -998,7 +1019,7 @@ class Soak:
         }
         self.samples.append(sample)
         lat = sample['latency']
-        model = procs.get('model_node', {})
+        model = procs.get('model_node', procs.get('gripper', {}))
         print(f'{sample["t"]:7.0f} s  model RSS {model.get("rss_mib", math.nan):7.1f} MiB '
               f'fds {model.get("fds", "-")}  latency p50 {lat["p50"]:6.2f} p99 '
               f'{lat["p99"]:7.2f} max {lat["max"]:7.1f} ms  commands {window.commands} '
@@ -1114,6 +1135,7 @@ class Soak:
                        'sample_period_s': args.sample_period, 'warmup_s': args.warmup,
                        'answer_timeout_s': args.answer_timeout, 'open_s': args.open_s,
                        'grasp_s': args.grasp_s, 'object': list(OBJECT),
+                       'composed': args.composed,
                        'gripper_config': self.config_path, 'fingers': list(self.fingers)},
             'processes': {name: {'argv': p.argv, 'pid': p.pid, 'log': str(p.log_path),
                                  **stopped.get(name, {})} for name, p in self.procs.items()},
@@ -1228,6 +1250,9 @@ def parse_args(argv):
                         help='longest wait for every node to be up (a first numba compile '
                              'takes minutes) [s]')
     parser.add_argument('--gripper-config', default=None, help='gripper YAML')
+    parser.add_argument('--composed', action='store_true',
+                        help='every node in one process (the gripper executable) instead of '
+                             'one process each')
     parser.add_argument('--workdir', default=None,
                         help='node logs and the recording (default a new /tmp/fpc_soak_*)')
     parser.add_argument('--keep-mcap', action='store_true',

@@ -3,6 +3,9 @@
 # Run by bench/soak.py, one process each:
 #   python bench/soak_nodes.py regulator_bridge --ros-args ...   (the bridge, sim backend)
 #   python bench/soak_nodes.py virtual_object --ros-args ...     (gripper_demo's object)
+# or, with soak.py --composed, every node in one process as the `gripper` executable runs
+# them (with --record --virtual-object):
+#   python bench/soak_nodes.py gripper --ros-args ...
 # The bridge is fpc_gripper's RegulatorBridge, unchanged, built and spun by the package's
 # run_node exactly as `regulator_bridge` is; it only gets one more subscription,
 # `soak/regulator_fault` (std_msgs/String, JSON), through which the soak injects faults
@@ -19,6 +22,8 @@ from rclpy.qos import QoSProfile
 from rclpy.qos import ReliabilityPolicy
 from std_msgs.msg import String
 
+from fpc_gripper.nodes.gripper import bridge_exit_code
+from fpc_gripper.nodes.gripper import compose
 from fpc_gripper.nodes.regulator_bridge import _activation_exit_code
 from fpc_gripper.nodes.regulator_bridge import RegulatorBridge
 from fpc_gripper.nodes.runner import run_node
@@ -64,6 +69,14 @@ class FaultHook:
             self.node.get_logger().info('soak faults cleared')
 
 
+def _gripper_with_hook():
+    nodes = compose(record=True, virtual_object=True)
+    for node in nodes:
+        if isinstance(node, RegulatorBridge):
+            node.soak_fault_hook = FaultHook(node)
+    return nodes
+
+
 def _bridge_with_hook():
     node = RegulatorBridge(auto_activate_default=True)
     node.soak_fault_hook = FaultHook(node)
@@ -78,10 +91,12 @@ def main(argv=None):
         # The same exit-code check as the package's regulator_bridge main.
         return run_node(_bridge_with_hook, 'regulator_bridge', argv,
                         check=_activation_exit_code)
+    if kind == 'gripper':
+        return run_node(_gripper_with_hook, 'gripper', argv, check=bridge_exit_code)
     if kind == 'virtual_object':
         return run_node(functools.partial(VirtualObjectNode, 'virtual_object'),
                         'virtual_object', argv)
-    print('usage: soak_nodes.py {regulator_bridge|virtual_object} [--ros-args ...]',
+    print('usage: soak_nodes.py {regulator_bridge|virtual_object|gripper} [--ros-args ...]',
           file=sys.stderr)
     return 2
 
