@@ -49,6 +49,12 @@ _STRUCTURAL = ('gripper_config', 'backend', 'modbus_config', 'modbus_host', 'mod
 _COMMAND_QOS = QoSProfile(depth=10, history=HistoryPolicy.KEEP_LAST,
                           reliability=ReliabilityPolicy.RELIABLE)
 _RECONNECT_S = 1.0
+#: A real regulator's watchdog, rate limit and safe state follow the node clock: on /clock
+#: a stopped simulation would hold the device at its last pressure.
+_SIM_TIME_REFUSED = ('`use_sim_time` is true with backend modbus: a real regulator runs on '
+                     'the wall clock (its watchdog, rate limit and safe state follow the node '
+                     'clock, and a stopped /clock would hold its last pressure); use backend '
+                     'sim on simulated time')
 # The bounds that apply to a pressure command.
 _BOUNDS = ('min_absolute_pressure', 'max_frame_id_length', 'max_payload_bytes')
 _LEVELS = {Level.OK: DiagnosticStatus.OK, Level.WARN: DiagnosticStatus.WARN,
@@ -336,6 +342,9 @@ class RegulatorBridge(LifecycleNode):
                     successful=False,
                     reason=f'`backend` must be one of {list(BACKEND_KINDS)}, '
                            f'got {param.value!r}')
+            if param.name == 'use_sim_time' and param.value and self._configured \
+                    and self._backend_kind == 'modbus':
+                return SetParametersResult(successful=False, reason=_SIM_TIME_REFUSED)
             if param.name == 'safe_state' and param.value not in SAFE_STATES:
                 return SetParametersResult(
                     successful=False,
@@ -379,6 +388,9 @@ class RegulatorBridge(LifecycleNode):
             result = self._validate_parameters([param(name)])
             if not result.successful:
                 raise ValueError(result.reason)
+        if param('backend').value == 'modbus' and self._injected_backend is None \
+                and param('use_sim_time').value:
+            raise ConfigError('parameters', 'use_sim_time', _SIM_TIME_REFUSED)
         config, register_map = load_bridge_config(
             param('gripper_config').value,
             param('backend').value if self._injected_backend is None else 'injected',

@@ -2,6 +2,8 @@
 
 import itertools
 import math
+import pathlib
+import sys
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray
@@ -27,6 +29,7 @@ pytestmark = pytest.mark.ros
 
 ATM = 101325.0
 CONFIG = load_gripper_config(default_gripper_config_path())
+MODBUS_MAP = pathlib.Path(__file__).resolve().parents[2] / 'msg_configs' / 'modbus_example.yaml'
 FINGERS = CONFIG.names
 _counter = itertools.count()
 
@@ -296,3 +299,38 @@ def test_lifecycle_deactivate_vents_and_cleanup_closes(ros):
     finally:
         executor.remove_node(bridge)
         bridge.destroy_node()
+
+
+def test_a_real_regulator_refuses_simulated_time(ros, tmp_path):
+    """Modbus with use_sim_time: refused at configure (before the map is read) and at a set."""
+    sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / 'regulators'))
+    from regulator_test_utils import Server
+
+    context, _ = ros
+    # The map does not exist: the refusal comes before any file or device is touched.
+    bridge = RegulatorBridge(namespace='/simclock', context=context, parameter_overrides=[
+        Parameter('backend', value='modbus'), Parameter('use_sim_time', value=True),
+        Parameter('modbus_config', value=str(tmp_path / 'absent.yaml'))])
+    try:
+        assert not bridge.configure_and_activate()
+        assert bridge.lifecycle_state == 'unconfigured'
+        assert str(bridge.config_error) == (
+            'parameters: use_sim_time: `use_sim_time` is true with backend modbus: a real '
+            'regulator runs on the wall clock (its watchdog, rate limit and safe state follow '
+            'the node clock, and a stopped /clock would hold its last pressure); use backend '
+            'sim on simulated time')
+    finally:
+        bridge.destroy_node()
+    server = Server()
+    bridge = RegulatorBridge(namespace='/wallclock', context=context, parameter_overrides=[
+        Parameter('backend', value='modbus'), Parameter('modbus_config', value=str(MODBUS_MAP)),
+        Parameter('modbus_host', value='127.0.0.1'), Parameter('modbus_port', value=server.port)])
+    try:
+        assert bridge.configure_and_activate() and bridge.lifecycle_state == 'active'
+        result = bridge.set_parameters([Parameter('use_sim_time', value=True)])[0]
+        assert not result.successful and 'use_sim_time' in result.reason
+        assert bridge.get_parameter('use_sim_time').value is False
+        assert not bridge.get_clock().ros_time_is_active
+    finally:
+        bridge.destroy_node()
+        server.close()
