@@ -24,7 +24,7 @@ from std_msgs.msg import String
 
 from fpc_gripper.nodes.gripper import bridge_exit_code
 from fpc_gripper.nodes.gripper import compose
-from fpc_gripper.nodes.regulator_bridge import _activation_exit_code
+from fpc_gripper.nodes.regulator_bridge import activation_exit_code
 from fpc_gripper.nodes.regulator_bridge import RegulatorBridge
 from fpc_gripper.nodes.runner import run_node
 from fpc_gripper.nodes.virtual_object import VirtualObjectNode
@@ -90,7 +90,7 @@ def main(argv=None):
     if kind == 'regulator_bridge':
         # The same exit-code check as the package's regulator_bridge main.
         return run_node(_bridge_with_hook, 'regulator_bridge', argv,
-                        check=_activation_exit_code)
+                        check=activation_exit_code)
     if kind == 'gripper':
         return run_node(_gripper_with_hook, 'gripper', argv, check=bridge_exit_code)
     if kind == 'virtual_object':

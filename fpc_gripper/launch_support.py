@@ -2,7 +2,8 @@
 
 import pathlib
 
-__all__ = ['COMMON_ARGUMENTS', 'arguments', 'config_file', 'node_parameters', 'share_directory']
+__all__ = ['COMMON_ARGUMENTS', 'arguments', 'composed_parameters', 'config_file',
+           'node_parameters', 'share_directory']
 
 PACKAGE = 'fpc_gripper'
 #: ``(name, default, description)`` of the launch arguments every launch file declares;
@@ -25,7 +26,8 @@ def share_directory():
     try:
         from ament_index_python.packages import get_package_share_directory
         return pathlib.Path(get_package_share_directory(PACKAGE))
-    except (ImportError, LookupError):
+    except (ImportError, LookupError, OSError):
+        # OSError: no AMENT_PREFIX_PATH at all (a source checkout, not sourced).
         return pathlib.Path(__file__).resolve().parents[1]
 
 
@@ -100,3 +102,44 @@ def node_parameters(context, node_name, frames=True, **overrides):
     shared.update({k: v for k, v in overrides.items() if v is not None})
     params.append(shared)
     return params
+
+
+def composed_parameters(per_node, directory=None):
+    """
+    Merge the nodes' `node_parameters` lists into the one list of a composed process.
+
+    The files (each node's config file, the params_file) come once each, in order; each
+    node's own values (the dict that ends its list) go into one more file, under the key
+    ``/**/<node name>``, so that they reach that node only, in any namespace. (A dict
+    given to launch_ros would be keyed ``/**`` and reach every node of the process that
+    declares a parameter of that name.)
+
+    Parameters
+    ----------
+    per_node : dict
+        Node name -> its `node_parameters` list.
+    directory : path-like, optional
+        Where to write the file (default the system's temporary directory, as launch_ros
+        does with its own parameter files).
+
+    Returns
+    -------
+    list of str
+        Parameter file paths for ``launch_ros.actions.Node(parameters=...)``.
+
+    """
+    import tempfile
+
+    import yaml
+
+    files, sections = [], {}
+    for name, params in per_node.items():
+        for entry in params:
+            if isinstance(entry, dict):
+                sections[f'/**/{name}'] = {'ros__parameters': dict(entry)}
+            elif str(entry) not in files:
+                files.append(str(entry))
+    with tempfile.NamedTemporaryFile('w', prefix='fpc_gripper_composed_', suffix='.yaml',
+                                     dir=directory, delete=False) as stream:
+        yaml.safe_dump(sections, stream, sort_keys=False)
+    return files + [stream.name]

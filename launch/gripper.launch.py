@@ -10,12 +10,14 @@ The regulator bridge is a lifecycle node. With autostart (the default) it config
 activates itself as it starts (auto_activate), in its own process: no round trip through
 its lifecycle services, whose discovery took about 2 s of the start-up; a configuration it
 cannot activate ends it with exit code 2 (invalid) or 1 (device unreachable), which launch
-reports. autostart:=false starts it unconfigured, for a lifecycle manager or ``ros2
+reports, and which ends the launch (the others cannot drive the gripper without it).
+autostart:=false starts it unconfigured, for a lifecycle manager or ``ros2
 lifecycle set``. Every node reads share/fpc_gripper/config/<node>.yaml, then
 params_file, then the launch arguments. composed:=true starts the same nodes as one
-process, the ``gripper`` executable (one executor: no DDS hop between them, one
-interpreter's memory); its parameter files are the same, and its launch-argument values
-reach the nodes that declare them. Nothing is imported from launch until
+process, the ``gripper`` executable (one interpreter, one executor, one set of DDS
+threads); its parameter files are the same, and its launch-argument values
+reach the nodes as they would reach the separate ones (one more parameter file, keyed
+/**/<node name>). Nothing is imported from launch until
 generate_launch_description() runs, so the file imports without launch installed.
 """
 
@@ -24,9 +26,10 @@ def generate_launch_description():
     """Return the launch description of the gripper."""
     from launch import LaunchDescription
     from launch.actions import OpaqueFunction
+    from launch.actions import Shutdown
     from launch_ros.actions import LifecycleNode, Node
 
-    from fpc_gripper.launch_support import arguments, config_file, node_parameters
+    from fpc_gripper.launch_support import arguments, composed_parameters, node_parameters
 
     def nodes(context):
         value = context.launch_configurations.get
@@ -39,21 +42,20 @@ def generate_launch_description():
         recorder = node_parameters(context, 'mcap_recorder', frames=False,
                                    output_path=value('record_path') or None)
         if value('composed', 'false').lower() in ('true', '1', 'yes'):
-            names = ('regulator_bridge', 'model_node', 'gripper_controller')
-            files = [str(config_file(n)) for n in names + (('mcap_recorder',) if record else ())]
-            # One dict for the process (launch_ros keys it /**): each value reaches the
-            # nodes that declare the parameter, and only those. No name: a __node remap
-            # would rename every node of the process.
-            shared = {**bridge[-1], **node_parameters(context, 'model_node')[-1]}
+            # One process: no name (a __node remap would rename every node in it).
+            per_node = {'regulator_bridge': bridge,
+                        'model_node': node_parameters(context, 'model_node'),
+                        'gripper_controller': node_parameters(context, 'gripper_controller')}
             if record:
-                shared.update(recorder[-1])
+                per_node['mcap_recorder'] = recorder
             return [Node(package='fpc_gripper', executable='gripper', namespace=namespace,
                          output='screen', arguments=['--record'] if record else [],
-                         parameters=files + bridge[1:-1] + [shared])]
+                         parameters=composed_parameters(per_node))]
         actions = [
             LifecycleNode(
                 package='fpc_gripper', executable='regulator_bridge', name='regulator_bridge',
-                namespace=namespace, output='screen', parameters=bridge),
+                namespace=namespace, output='screen', parameters=bridge,
+                on_exit=[Shutdown(reason='regulator_bridge ended')]),
             Node(package='fpc_gripper', executable='model_node', name='model_node',
                  namespace=namespace, output='screen',
                  parameters=node_parameters(context, 'model_node')),

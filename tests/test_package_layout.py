@@ -28,7 +28,7 @@ _NOT_COPIED = ('.venv', '.git', 'build', 'install', 'log', 'out', '*.egg-info', 
 
 def _console_scripts():
     text = (ROOT / 'setup.py').read_text()
-    return re.findall(r"'([\w-]+) = fpc_gripper[\w.]*:main'", text)
+    return re.findall(r"'([\w-]+) = fpc_gripper[\w.]*:\w+'", text)
 
 
 # A requirement's name (PEP 508) at the start of a requirements.in line; a lock line exactly.

@@ -39,7 +39,8 @@ def compose(record=False, virtual_object=False, overrides=None, **kwargs):
     parameter says otherwise; each node reads its parameters as it would in a process of
     its own (``--params-file`` sections keyed ``/**/<node name>`` reach only that node).
     A node that cannot be built destroys the ones built before it, then its error
-    propagates.
+    propagates. A bridge that was to activate itself and did not ends the build: the list
+    holds it alone (`bridge_exit_code` says why).
 
     Parameters
     ----------
@@ -72,6 +73,9 @@ def compose(record=False, virtual_object=False, overrides=None, **kwargs):
             if wanted.get(name, True):
                 built[name] = builders[name](
                     parameter_overrides=list(overrides.get(name, ())), **kwargs)
+                if name == 'regulator_bridge' and bridge_exit_code([built[name]]) is not None:
+                    # It has logged why; the others would only announce that they are ready.
+                    break
     except BaseException:
         for node in reversed(built.values()):
             node.destroy_node()
@@ -81,11 +85,11 @@ def compose(record=False, virtual_object=False, overrides=None, **kwargs):
 
 def bridge_exit_code(nodes):
     """Exit code when the composed bridge did not activate (see regulator_bridge.main)."""
-    from fpc_gripper.nodes.regulator_bridge import _activation_exit_code
+    from fpc_gripper.nodes.regulator_bridge import activation_exit_code
     from fpc_gripper.nodes.regulator_bridge import RegulatorBridge
     for node in nodes:
         if isinstance(node, RegulatorBridge):
-            return _activation_exit_code(node)
+            return activation_exit_code(node)
     return None
 
 

@@ -4,6 +4,7 @@ import argparse
 from dataclasses import dataclass, field
 import math
 import pathlib
+import signal
 import sys
 import time
 
@@ -15,6 +16,7 @@ from rclpy.parameter import Parameter
 from rclpy.qos import HistoryPolicy
 from rclpy.qos import QoSProfile
 from rclpy.qos import ReliabilityPolicy
+from rclpy.signals import SignalHandlerOptions
 from rclpy.task import Future
 from std_msgs.msg import Float64
 
@@ -28,6 +30,8 @@ from fpc_gripper.nodes.gripper import bridge_exit_code
 from fpc_gripper.nodes.gripper import compose
 from fpc_gripper.nodes.runner import make_executor
 from fpc_gripper.nodes.runner import own_arguments
+from fpc_gripper.nodes.runner import SPIN_TIMEOUT_S
+from fpc_gripper.nodes.runner import StopRequest
 
 __all__ = ['Phase', 'SessionScript', 'main', 'run_session']
 
@@ -204,7 +208,8 @@ def default_phases(open_aperture=0.120, grasp_force=1.5, hold_s=3.0):
 
 
 def run_session(output_dir, object_diameter=0.040, grasp_force=1.5, open_aperture=0.120,
-                hold_s=3.0, context=None, gripper_config=None, obj='cylinder', mu=0.5):
+                hold_s=3.0, context=None, gripper_config=None, obj='cylinder', mu=0.5,
+                stop_requested=None):
     """
     Run the composed gripper (`fpc_gripper.nodes.gripper.compose`) and the session script.
 
@@ -220,6 +225,8 @@ def run_session(output_dir, object_diameter=0.040, grasp_force=1.5, open_apertur
         Total normal force on the object to grasp with [N].
     mu : float
         Friction coefficient of the holding force reported for the hold phase [-].
+    stop_requested : callable, optional
+        True when the session is to end early (a stop signal); checked every 0.1 s.
 
     Returns
     -------
@@ -267,8 +274,10 @@ def run_session(output_dir, object_diameter=0.040, grasp_force=1.5, open_apertur
                                grasp_force, arcs=virtual.arcs, **common)
         nodes.append(script)
         executor, _ = make_executor(nodes)
-        budget = 30.0 + sum(p.timeout for p in script.phases)
-        executor.spin_until_future_complete(script.done, timeout_sec=budget)
+        deadline = time.monotonic() + 30.0 + sum(p.timeout for p in script.phases)
+        stop_requested = stop_requested or (lambda: False)
+        while not (script.done.done() or stop_requested()) and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=SPIN_TIMEOUT_S)
         max_command = getattr(controller, 'max_command_seen', math.nan)
         recorder.close()
         for phase in script.phases:
@@ -324,6 +333,11 @@ def format_summary(phases, info):
 
 def main(args=None):
     """Run the scripted session; exit 0 only if every phase reached its goal."""
+    # Ctrl-C or SIGTERM: the session ends, its nodes are destroyed (the recording closed),
+    # exit 130. rclpy's own handlers would shut the context down under running callbacks.
+    stop = StopRequest()
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(signum, stop)
     argv = own_arguments(args, 'gripper_demo')
     if argv is None:
         return 1
@@ -340,17 +354,22 @@ def main(args=None):
     parser.add_argument('--hold', type=float, default=3.0, help='hold duration [s]')
     parser.add_argument('--gripper-config', default=None, help='gripper YAML')
     options = parser.parse_args(argv[1:])
-    rclpy.init(args=args)
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     phases, info = [], None
     try:
         phases, info = run_session(options.output_dir, options.object_diameter,
                                    options.grasp_force, options.open_aperture, options.hold,
                                    gripper_config=options.gripper_config,
-                                   obj=options.object, mu=options.mu)
-    except (KeyboardInterrupt, ExternalShutdownException):
+                                   obj=options.object, mu=options.mu,
+                                   stop_requested=lambda: stop.requested)
+    except ExternalShutdownException:
         return 130
     finally:
+        stop.stopping = True
         rclpy.try_shutdown()
+    if stop.requested:
+        print(f'session stopped by signal {stop.signum}; recording: {info["mcap"]}')
+        return 130
     png = pathlib.Path(options.output_dir) / 'session.png'
     try:
         make_chart(info['mcap'], png, phases, options.grasp_force)

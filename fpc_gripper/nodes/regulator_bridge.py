@@ -622,11 +622,11 @@ def main(args=None):
     half-configured.
     """
     return run_node(functools.partial(RegulatorBridge, auto_activate_default=True),
-                    'regulator_bridge', args, check=_activation_exit_code)
+                    'regulator_bridge', args, check=activation_exit_code)
 
 
-def _activation_exit_code(node):
-    """Exit code for a bridge whose auto-activation failed, None when it may spin."""
+def activation_exit_code(node):
+    """Exit code for a bridge whose auto-activation failed (2 invalid, 1 else), or None."""
     if node.get_parameter('auto_activate').value and node.lifecycle_state != 'active':
         return 2 if node.config_error is not None else 1
     return None

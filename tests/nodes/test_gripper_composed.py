@@ -16,6 +16,9 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from std_msgs.msg import Float64
 
+from fpc_gripper.launch_support import composed_parameters
+from fpc_gripper.launch_support import config_file
+from fpc_gripper.launch_support import node_parameters
 from fpc_gripper.nodes import gripper
 from fpc_gripper.nodes.gripper import compose
 from fpc_gripper.nodes.gripper import NODE_NAMES
@@ -158,6 +161,8 @@ def test_a_bridge_that_cannot_activate_ends_the_process_with_2(tmp_path):
                          capture_output=True, text=True, timeout=STARTUP_S, cwd=tmp_path)
     assert run.returncode == 2, run.stderr
     assert 'modbus_config' in run.stderr and 'Traceback' not in run.stderr
+    # The build stopped at the bridge: no other node announced itself.
+    assert 'ready:' not in run.stderr and 'waiting for pressure input' not in run.stderr
 
 
 def test_ros_arguments_rcl_cannot_parse_end_the_process_with_1(tmp_path):
@@ -169,3 +174,43 @@ def test_ros_arguments_rcl_cannot_parse_end_the_process_with_1(tmp_path):
     assert "cannot start: Failed to parse ROS arguments: Couldn't parse parameter override " \
         "rule: '-p /ns/model_node:max_rate_hz:=50.0'" in run.stderr
     assert 'Traceback' not in run.stderr
+
+
+class _LaunchContext:
+    """What node_parameters reads of a launch context: the launch arguments."""
+
+    def __init__(self, **values):
+        self.launch_configurations = values
+
+
+@pytest.mark.ros
+def test_the_composed_launch_parameters_reach_each_node_only(tmp_path):
+    """gripper.launch.py composed:=true's parameter list, applied by rcl as a process would."""
+    launch = _LaunchContext(gripper_config=str(ROOT / 'msg_configs' / 'gripper_paper.yaml'),
+                            use_sim_time='false', frame_prefix='left/')
+    per_node = {'regulator_bridge': node_parameters(launch, 'regulator_bridge', backend='sim',
+                                                    auto_activate=False),
+                'model_node': node_parameters(launch, 'model_node', tolerance=1e-4),
+                'gripper_controller': node_parameters(launch, 'gripper_controller')}
+    files = composed_parameters(per_node, directory=tmp_path)
+    # Each config file once, then the file of the nodes' own values.
+    assert files[:-1] == [str(config_file(name)) for name in per_node]
+    context = rclpy.Context()
+    rclpy.init(context=context, args=['gripper', '--ros-args', '-r', '__ns:=/left',
+                                      *[a for f in files for a in ('--params-file', f)]])
+    try:
+        nodes = compose(context=context)
+        try:
+            by_name = {n.get_name(): n for n in nodes}
+            assert by_name['model_node'].get_parameter('tolerance').value == pytest.approx(1e-4)
+            # The controller declares a tolerance too: its file's default, not the model's.
+            assert by_name['gripper_controller'].get_parameter('tolerance').value \
+                == pytest.approx(5e-5)
+            assert by_name['regulator_bridge'].lifecycle_state == 'unconfigured'
+            assert all(n.get_parameter('frame_prefix').value == 'left/' for n in nodes)
+            assert by_name['model_node'].get_namespace() == '/left'
+        finally:
+            for node in reversed(nodes):
+                node.destroy_node()
+    finally:
+        context.try_shutdown()

@@ -199,3 +199,17 @@ def test_an_unreadable_params_file_exits_1_with_a_message(tmp_path):
     assert run.returncode == 1
     assert "cannot start: failed to initialize rcl: Couldn't parse params file" in run.stderr
     assert 'Traceback' not in run.stderr
+
+
+@pytest.mark.parametrize('script', ['model_node', 'gripper_controller', 'gripper'])
+def test_a_stop_while_the_console_script_imports_exits_0_quietly(script):
+    """ros2 launch stops every node when one dies at its start: they may still be importing."""
+    bin_dir = pathlib.Path(sys.executable).parent
+    process = subprocess.Popen([str(bin_dir / script)], stdout=subprocess.PIPE,
+                               stderr=subprocess.STDOUT, text=True)
+    # Within the imports (rclpy, scipy, numba: seconds), after the script's first lines.
+    time.sleep(0.3)
+    process.send_signal(signal.SIGINT)
+    output, _ = process.communicate(timeout=60)
+    assert process.returncode == 0, output
+    assert 'Traceback' not in output and 'KeyboardInterrupt' not in output, output
