@@ -21,9 +21,7 @@ def stalled_recorder(stall_s):
     def stall():
         if not node.received:
             return
-        # Cancelled, not destroyed: the EventsExecutor fails on a timer destroyed in its
-        # own callback.
-        state['timer'].cancel()
+        node.destroy_timer(state['timer'])
         time.sleep(stall_s)
         node.get_logger().info(f'stalled the executor for {stall_s:g} s')
 
