@@ -11,6 +11,8 @@ import threading
 from mcap.writer import CompressionType, Writer
 import yaml
 
+from .mcap_index_spill import spill_chunk_indexes
+
 __all__ = [
     'BAG_METADATA_VERSION', 'DEFINITION_SEPARATOR', 'MESSAGE_ENCODING', 'PROFILE',
     'SCHEMA_ENCODING', 'McapWriterError', 'Rosbag2McapWriter', 'SchemaNotFoundError',
@@ -418,6 +420,8 @@ class _File:
         self.stream = open(path, 'wb')
         self.writer = Writer(self.stream, chunk_size=chunk_size,
                              compression=_COMPRESSION[compression])
+        # A chunk index per chunk until the summary: on disk, not in memory.
+        self.spilled = spill_chunk_indexes(self.writer, path.parent)
         self.writer.start(profile=profile, library=library)
         # The magic and header go to disk now, so even an early crash leaves an MCAP file.
         self.stream.flush()
@@ -754,6 +758,8 @@ class Rosbag2McapWriter:
         f.stream.flush()
         os.fsync(f.stream.fileno())
         f.stream.close()
+        if f.spilled is not None:
+            f.spilled.close()
         self._files.append(info)
         self._file = None
 

@@ -25,10 +25,15 @@ __all__ = ['McapRecorder', 'main']
 
 _COMPRESSIONS = ('zstd', 'lz4', 'none')
 _DEFAULT_FINGERS = ('finger_0', 'finger_1', 'finger_2')
-# Depth of the recorder's subscriptions: 5 s of a 200 Hz topic. The middleware fills it
-# only while the executor lags (a CPU hog, a burst), and then it is what keeps the
-# messages: at 100, a loaded recorder lost hundreds. It costs memory only when used.
-_SUBSCRIPTION_DEPTH = 1000
+# Subscriptions keep every message until it is taken: while the executor lags (a CPU hog,
+# a burst), the reader's queue is what keeps the messages, and a keep-last queue drops its
+# oldest silently (1000 deep, a 3 s stall at 500 Hz lost 500 of a reliable topic). Fast DDS
+# holds at most 5000 samples per reader by default (25 s of a 200 Hz topic); past that a
+# reliable reader stops acknowledging and the publisher's own history decides. The queue
+# costs memory only while it is used.
+_HISTORY = HistoryPolicy.KEEP_ALL
+# Most messages taken per topic at a stop: ends a take that races a publisher.
+_STOP_TAKE_LIMIT = 100_000
 _RCLError = rclpy_implementation.RCLError
 _DIAGNOSTICS_QOS = QoSProfile(depth=10, history=HistoryPolicy.KEEP_LAST,
                               reliability=ReliabilityPolicy.RELIABLE)
@@ -53,7 +58,7 @@ def adapt_qos_to_publishers(profiles):
     Choose a subscription QoS that connects to every publisher, as rosbag2 does.
 
     Reliable only if every publisher is reliable, transient-local only if every publisher
-    is; keep-last with a deep queue; deadline and liveliness left unspecified.
+    is; keep-all history (see `_HISTORY`); deadline and liveliness left unspecified.
 
     Parameters
     ----------
@@ -70,7 +75,7 @@ def adapt_qos_to_publishers(profiles):
     latched = bool(profiles) and all(
         p.durability == DurabilityPolicy.TRANSIENT_LOCAL for p in profiles)
     return QoSProfile(
-        history=HistoryPolicy.KEEP_LAST, depth=_SUBSCRIPTION_DEPTH,
+        history=_HISTORY,
         reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
         durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE)
 
@@ -80,19 +85,22 @@ class McapRecorder(Node):
     Record a list of topics to MCAP, subscribing to each with a QoS its publishers accept.
 
     Topics without a publisher yet are looked for again every ``discovery_period_s``.
-    Callbacks only queue the raw CDR with its receive time (a `BackgroundWriter`); its
-    thread compresses the chunks and, every ``flush_period_s / 2``, closes the open chunk,
-    writes it with its index and fsyncs the file, so a ``kill -9`` loses at most the last
-    ``flush_period_s`` of messages. Destroying the node (`main` does on SIGINT and
-    SIGTERM, once or repeated) takes what is left in the subscriptions' queues, writes
-    it, then the summary and index.
+    Subscriptions keep every message until it is taken (keep-all history), whatever the
+    reliability. Callbacks only queue the raw CDR with its receive time (a
+    `BackgroundWriter`) and never wait for it; its thread compresses the chunks and, every
+    ``flush_period_s / 2``, closes the open chunk, writes it with its index and fsyncs the
+    file, so a ``kill -9`` loses at most the last ``flush_period_s`` of messages.
+    Destroying the node (`main` does on SIGINT and SIGTERM, once or repeated) takes what
+    is left in the subscriptions' queues, writes it, then the summary and index, and logs
+    one line: messages received, written and dropped.
 
     Message content never stops it: log time is the node clock at reception, and a
     header stamp that is not a valid time (negative seconds, nanoseconds past a second)
     is kept as it is in the payload while the record's publish time falls back to the
     log time; such stamps are counted (`invalid_stamps`). Messages dropped because the
     queue was full (``max_queue_mb``) and failed writes are counted too, logged, and
-    reported on ``/diagnostics`` every ``diagnostics_period_s``.
+    reported on ``/diagnostics`` every ``diagnostics_period_s``, with what each topic
+    received and dropped.
     """
 
     def __init__(self, **kwargs):
@@ -100,6 +108,8 @@ class McapRecorder(Node):
         self._writer = None
         self._background = None
         self._subs = {}
+        # Per topic: [messages received, of them dropped because the queue was full].
+        self._counts = {}
         self._stamped = {}
         self._params = {}
         self.invalid_stamps = 0
@@ -248,6 +258,7 @@ class McapRecorder(Node):
         # Raw subscriptions hand over the CDR bytes: nothing is deserialised and
         # serialised again, which for a 129-pose Path costs milliseconds per message.
         self._stamped[topic] = _starts_with_header(msg_class)
+        self._counts.setdefault(topic, [0, 0])
         self._subs[topic] = (self.create_subscription(
             msg_class, topic, functools.partial(self._on_message, topic), qos, raw=True),
             msg_class, qos)
@@ -272,6 +283,8 @@ class McapRecorder(Node):
         if self._writer is None:
             return
         log_time = self.get_clock().now().nanoseconds
+        counts = self._counts[topic]
+        counts[0] += 1
         publish_time = log_time
         if self._stamped.get(topic):
             stamp = _cdr_header_stamp(data)
@@ -284,7 +297,8 @@ class McapRecorder(Node):
             elif stamp:
                 publish_time = stamp
         try:
-            self._background.put(topic, bytes(data), log_time, publish_time)
+            if not self._background.put(topic, bytes(data), log_time, publish_time):
+                counts[1] += 1
         except McapWriterError as error:
             self._refused += 1
             self._write_failed(error)
@@ -314,10 +328,14 @@ class McapRecorder(Node):
             level, message = DiagnosticStatus.OK, 'recording'
         if self._diagnostics_pub is None:
             return
-        values = {'file': str(self._writer.path), 'messages written': background.written,
+        values = {'file': str(self._writer.path),
+                  'messages received': sum(c[0] for c in self._counts.values()),
+                  'messages written': background.written,
                   'queued': background.queued, 'queued bytes': background.queued_bytes,
                   'dropped (queue full)': counts[0], 'invalid stamps': counts[1],
                   'failed writes': counts[2], 'topics': len(self._subs)}
+        for topic, (received, dropped) in self._counts.items():
+            values[topic] = f'received {received}, dropped {dropped} (queue full)'
         array = DiagnosticArray()
         array.header.stamp = self.get_clock().now().to_msg()
         array.status = [DiagnosticStatus(
@@ -337,6 +355,11 @@ class McapRecorder(Node):
         return self._background
 
     @property
+    def received(self):
+        """Messages received so far, over every topic."""
+        return sum(c[0] for c in self._counts.values())
+
+    @property
     def recorded_topics(self):
         """Topics subscribed so far."""
         return list(self._subs)
@@ -348,22 +371,27 @@ class McapRecorder(Node):
         # Messages the middleware has received but the executor has not handed over yet
         # are the recording's too: on a loaded machine, hundreds at a stop.
         for topic, (subscription, _, _) in list(self._subs.items()):
-            for _ in range(_SUBSCRIPTION_DEPTH):
-                data = _take(subscription)
-                if data is None:
+            for _ in range(_STOP_TAKE_LIMIT):
+                taken = _take(subscription)
+                if taken is None:
                     break
-                self._on_message(topic, data)
+                self._on_message(topic, taken[0])
         writer, self._writer = self._writer, None
         background, self._background = self._background, None
         background.close()
+        received = self.received
+        full = background.dropped
+        written = writer.message_count
+        # Whatever was received and neither written nor refused by the full queue failed
+        # (a write error, or a put after the writer thread died).
+        failed = received - written - full
         # After SIGINT/SIGTERM the context is shut down and /rosout cannot publish.
         logger = self.get_logger() if self.context.ok() else \
             rclpy.logging.get_logger('fpc_gripper.mcap_recorder')
         logger.info(
-            f'closed {", ".join(str(p) for p in writer.paths)}: {writer.message_count} '
-            f'messages; {background.dropped} dropped (queue full), '
-            f'{background.errors + self._refused} failed writes, {self.invalid_stamps} '
-            f'invalid header stamps')
+            f'closed {", ".join(str(p) for p in writer.paths)}: received {received}, '
+            f'written {written}, dropped {full + failed} ({full} queue full, {failed} '
+            f'failed writes); {self.invalid_stamps} invalid header stamps')
 
     def destroy_node(self):
         """Close the recording, then destroy the node."""
@@ -399,14 +427,13 @@ def _cdr_header_stamp(data):
 
 
 def _take(subscription):
-    """Take one queued raw message from a subscription, or None if there is none."""
+    """Take one queued raw message and its info from a subscription, or None if none."""
     try:
         with subscription.handle:
-            taken = subscription.handle.take_message(subscription.msg_type, subscription.raw)
+            return subscription.handle.take_message(subscription.msg_type, subscription.raw)
     except (InvalidHandle, _RCLError):
         # Destroyed, or its context shut down already (an external shutdown).
         return None
-    return None if taken is None else taken[0]
 
 
 def main(args=None):
