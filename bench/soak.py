@@ -1239,16 +1239,16 @@ def parse_args(argv):
                         help='mean time between faults [s]')
     parser.add_argument('--sample-period', type=float, default=5.0, help='[s]')
     parser.add_argument('--warmup', type=float, default=15.0,
-                        help='graph running before the measurement starts [s]')
+                        help='graph running before the measurement starts (the RSS slopes '
+                             'start one minute after it) [s]')
     parser.add_argument('--answer-timeout', type=float, default=2.0,
                         help='a command without a shape after this long is lost [s]')
     parser.add_argument('--open-s', type=float, default=6.0,
                         help='time on each aperture goal [s]')
     parser.add_argument('--grasp-s', type=float, default=10.0,
                         help='time on each grasp-force goal [s]')
-    parser.add_argument('--startup-timeout', type=float, default=600.0,
-                        help='longest wait for every node to be up (a first numba compile '
-                             'takes minutes) [s]')
+    parser.add_argument('--startup-timeout', type=float, default=120.0,
+                        help='longest wait for every node to be up (2-5 s on 2 cores) [s]')
     parser.add_argument('--gripper-config', default=None, help='gripper YAML')
     parser.add_argument('--composed', action='store_true',
                         help='every node in one process (the gripper executable) instead of '
@@ -1256,7 +1256,7 @@ def parse_args(argv):
     parser.add_argument('--workdir', default=None,
                         help='node logs and the recording (default a new /tmp/fpc_soak_*)')
     parser.add_argument('--keep-mcap', action='store_true',
-                        help='keep the recording (some 25 MiB a minute at 200 Hz) after '
+                        help='keep the recording (some 100 MiB a minute at 200 Hz) after '
                              'reading it')
     args = parser.parse_args(argv)
     if os.environ.get('FPC_NETNS') != '1':

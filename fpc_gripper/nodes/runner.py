@@ -45,9 +45,10 @@ class StopRequest:
     the signal on), and launch follows up with SIGTERM after its timeout. None of these
     may interrupt the shutdown that the first one started, so the handler never raises
     while the shutdown runs. A signal that comes `force_after_s` or more after the
-    first, while a callback still holds the executor (a first-ever numba compile takes
-    minutes), raises KeyboardInterrupt, once, to end that callback: the node is then
-    destroyed as after any other stop.
+    first, while a callback still holds the executor (a long one: numba's fallback compile
+    when the built engine does not match the CPU takes minutes), raises
+    KeyboardInterrupt, once, to end that callback: the node is then destroyed as after
+    any other stop.
 
     Parameters
     ----------
