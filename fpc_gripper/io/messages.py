@@ -3,6 +3,7 @@
 import dataclasses
 import math
 import struct
+from typing import NamedTuple
 
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Point, PoseStamped, TransformStamped, Vector3Stamped
@@ -286,7 +287,8 @@ def model_messages(result, frame_id, stamp_ns, rigidity=(None, None)):
 # -- Additions for the model node: a fast serialized shape, and RViz/Foxglove markers. --------
 
 __all__ += ['GRIPPER_SHAPE_NAMESPACES', 'SHAPE_MARKER_NAMESPACE', 'FingerPlacement',
-            'gripper_shape_markers', 'palm_transform', 'serialized_shape', 'shape_marker']
+            'gripper_shape_markers', 'palm_transform', 'serialized_gripper_shape',
+            'serialized_shape', 'serialized_shape_markers', 'shape_marker']
 
 #: ``ns`` of the per-finger LINE_STRIP markers on ``markers``; the marker id is the finger index.
 SHAPE_MARKER_NAMESPACE = 'fpc_gripper/shape'
@@ -296,6 +298,7 @@ GRIPPER_SHAPE_NAMESPACES = {'midplane': 'fpc_gripper/midplane', 'tip': 'fpc_grip
 #: Fitted circles larger than this are not drawn (a nearly flat finger) [m].
 MAX_CIRCLE_RADIUS = 0.5
 _CIRCLE_POINTS = 73
+_CIRCLE_COLOR = (0.2, 0.4, 1.0, 0.6)
 #: CDR little-endian encapsulation, as every ROS 2 middleware writes it.
 _CDR_LE = b'\x00\x01\x00\x00'
 
@@ -469,24 +472,115 @@ def palm_transform(placement, palm_frame, finger_frame, stamp_ns=0):
     return msg
 
 
-def _marker(frame_id, stamp_ns, namespace, marker_id, kind, color, scale):
+class _MarkerParts(NamedTuple):
+    """What a gripper marker holds; the rest of ``visualization_msgs/Marker`` stays default."""
+
+    frame_id: str
+    stamp_ns: int
+    namespace: str
+    marker_id: int
+    kind: int
+    color: tuple
+    scale: float
+    position: tuple = (0.0, 0.0, 0.0)
+    points: np.ndarray = None
+    delete: bool = False
+
+
+def _to_marker(parts):
+    """Build the ``Marker`` object of `_MarkerParts`."""
     marker = Marker()
-    marker.header.stamp = ns_to_time(stamp_ns)
-    marker.header.frame_id = frame_id
-    marker.ns = namespace
-    marker.id = int(marker_id)
-    marker.type = kind
-    marker.action = Marker.ADD
+    marker.header.stamp = ns_to_time(parts.stamp_ns)
+    marker.header.frame_id = parts.frame_id
+    marker.ns = parts.namespace
+    marker.id = int(parts.marker_id)
+    marker.type = parts.kind
+    marker.action = Marker.DELETE if parts.delete else Marker.ADD
+    marker.pose.position = Point(x=parts.position[0], y=parts.position[1],
+                                 z=parts.position[2])
     marker.pose.orientation.w = 1.0
-    marker.scale.x = marker.scale.y = marker.scale.z = float(scale)
+    marker.scale.x = marker.scale.y = marker.scale.z = float(parts.scale)
+    color = parts.color
     marker.color = ColorRGBA(r=float(color[0]), g=float(color[1]), b=float(color[2]),
                              a=float(color[3]))
     marker.frame_locked = True
+    if parts.points is not None:
+        marker.points = [Point(x=x, y=y, z=z) for x, y, z in parts.points.tolist()]
     return marker
 
 
-def _points(xyz):
-    return [Point(x=x, y=y, z=z) for x, y, z in np.asarray(xyz, dtype=float).tolist()]
+class _Cdr:
+    """Little-endian CDR (XCDR1) into a buffer; alignment counts from the payload start."""
+
+    def __init__(self):
+        self.buffer = bytearray()
+
+    def pack(self, fmt, size, *values):
+        self.buffer += bytes(-len(self.buffer) % size)
+        self.buffer += struct.pack(fmt, *values)
+
+    def string(self, text):
+        data = text.encode('utf-8') + b'\x00'
+        self.pack('<I', 4, len(data))
+        self.buffer += data
+
+    def doubles(self, values):
+        self.buffer += bytes(-len(self.buffer) % 8)
+        self.buffer += np.ascontiguousarray(values, dtype='<f8').tobytes()
+
+
+def _marker_cdr(parts, cdr):
+    """Append the CDR of the ``Marker`` of `_MarkerParts`, as `_to_marker` builds it."""
+    sec, nanosec = divmod(int(parts.stamp_ns), 1_000_000_000)
+    cdr.pack('<iI', 4, sec, nanosec)
+    cdr.string(parts.frame_id)
+    cdr.string(parts.namespace)
+    cdr.pack('<iii', 4, int(parts.marker_id), parts.kind,
+             Marker.DELETE if parts.delete else Marker.ADD)
+    scale = float(parts.scale)
+    cdr.pack('<10d', 8, *(float(v) for v in parts.position), 0.0, 0.0, 0.0, 1.0,
+             scale, scale, scale)
+    # Lifetime 0 s, then frame_locked.
+    cdr.pack('<4fiI?', 4, *(float(v) for v in parts.color), 0, 0, True)
+    count = 0 if parts.points is None else len(parts.points)
+    cdr.pack('<I', 4, count)
+    if count:
+        cdr.doubles(parts.points)
+    # The rest, empty: colors, texture_resource, texture (stamp, frame_id, format, data),
+    # uv_coordinates, text, mesh_resource, mesh_file (filename, data),
+    # mesh_use_embedded_materials. Each empty string is 5 bytes, so the counts after it pad.
+    cdr.pack('<I', 4, 0)
+    cdr.string('')
+    cdr.pack('<iI', 4, 0, 0)
+    cdr.string('')
+    cdr.string('')
+    cdr.pack('<I', 4, 0)
+    cdr.pack('<I', 4, 0)
+    cdr.string('')
+    cdr.string('')
+    cdr.string('')
+    cdr.pack('<I', 4, 0)
+    cdr.pack('<?', 1, False)
+
+
+def _serialized_marker_array(parts_list):
+    """CDR bytes of the ``visualization_msgs/MarkerArray`` of `_MarkerParts`."""
+    cdr = _Cdr()
+    cdr.pack('<I', 4, len(parts_list))
+    for parts in parts_list:
+        _marker_cdr(parts, cdr)
+    return _CDR_LE + bytes(cdr.buffer)
+
+
+def _shape_marker_parts(result, frame_id, stamp_ns, marker_id, color, width, placement,
+                        namespace):
+    xz = np.asarray(result.points, dtype=float).reshape(-1, 2)
+    if placement is None:
+        points = np.column_stack([xz[:, 0], np.zeros(len(xz)), xz[:, 1]])
+    else:
+        points = placement.to_palm(xz)
+    return _MarkerParts(frame_id, stamp_ns, namespace, marker_id, Marker.LINE_STRIP, color,
+                        width, points=points)
 
 
 def shape_marker(result, frame_id, stamp_ns, marker_id, color=(0.1, 0.7, 0.2, 1.0),
@@ -519,14 +613,62 @@ def shape_marker(result, frame_id, stamp_ns, marker_id, color=(0.1, 0.7, 0.2, 1.
         Frame-locked, no lifetime, identity pose.
 
     """
-    marker = _marker(frame_id, stamp_ns, namespace, marker_id, Marker.LINE_STRIP, color,
-                     width)
-    xz = np.asarray(result.points, dtype=float)
-    if placement is None:
-        marker.points = [Point(x=x, z=z) for x, z in xz.tolist()]
-    else:
-        marker.points = _points(placement.to_palm(xz))
-    return marker
+    return _to_marker(_shape_marker_parts(result, frame_id, stamp_ns, marker_id, color,
+                                          width, placement, namespace))
+
+
+def serialized_shape_markers(fingers, palm_frame, width=0.002):
+    """
+    Serialize the ``markers`` MarkerArray, every finger's `shape_marker` in the palm frame.
+
+    The bytes decode to the message of `shape_marker` objects (the tests check it) at some
+    1/20 of their cost; ``Publisher.publish`` accepts them.
+
+    Parameters
+    ----------
+    fingers : iterable of tuple
+        As for `gripper_shape_markers`.
+    palm_frame : str
+        Frame id of the palm.
+    width : float
+        Line width [m].
+
+    Returns
+    -------
+    bytes
+        CDR of a ``visualization_msgs/MarkerArray``, one marker per finger, its index as id.
+
+    """
+    return _serialized_marker_array([
+        _shape_marker_parts(result, palm_frame, stamp_ns, index, color, width, placement,
+                            SHAPE_MARKER_NAMESPACE)
+        for index, result, stamp_ns, placement, color in fingers])
+
+
+def _gripper_shape_parts(fingers, palm_frame, width, tip_diameter):
+    # The model core (numba) loads only where circles are drawn, not with every fpc-mcap.
+    from ..model.analysis import fit_circle
+
+    names = GRIPPER_SHAPE_NAMESPACES
+    out = []
+    for index, result, stamp_ns, placement, color in fingers:
+        out.append(_shape_marker_parts(result, palm_frame, stamp_ns, index, color, width,
+                                       placement, names['midplane']))
+        tip = placement.to_palm(np.asarray(result.points, dtype=float)[-1:])[0]
+        out.append(_MarkerParts(palm_frame, stamp_ns, names['tip'], index, Marker.SPHERE,
+                                color, tip_diameter, position=tuple(tip.tolist())))
+        fit = fit_circle(result.points)
+        radius = abs(1.0 / fit.curvature) if fit.curvature else math.inf
+        if np.all(np.isfinite(fit.center)) and radius <= MAX_CIRCLE_RADIUS:
+            angle = np.linspace(0.0, 2.0 * math.pi, _CIRCLE_POINTS)
+            ring = fit.center + radius * np.column_stack([np.cos(angle), np.sin(angle)])
+            points, delete = placement.to_palm(ring), False
+        else:
+            points, delete = None, True
+        out.append(_MarkerParts(palm_frame, stamp_ns, names['circle'], index,
+                                Marker.LINE_STRIP, _CIRCLE_COLOR, 0.5 * width,
+                                points=points, delete=delete))
+    return out
 
 
 def gripper_shape_markers(fingers, palm_frame, width=0.002, tip_diameter=0.006):
@@ -557,28 +699,21 @@ def gripper_shape_markers(fingers, palm_frame, width=0.002, tip_diameter=0.006):
         `MAX_CIRCLE_RADIUS` or undefined (a flat finger).
 
     """
-    # The model core (numba) loads only where circles are drawn, not with every fpc-mcap.
-    from ..model.analysis import fit_circle
+    return [_to_marker(parts)
+            for parts in _gripper_shape_parts(fingers, palm_frame, width, tip_diameter)]
 
-    names = GRIPPER_SHAPE_NAMESPACES
-    out = []
-    for index, result, stamp_ns, placement, color in fingers:
-        out.append(shape_marker(result, palm_frame, stamp_ns, index, color=color, width=width,
-                                placement=placement, namespace=names['midplane']))
-        tip = _marker(palm_frame, stamp_ns, names['tip'], index, Marker.SPHERE, color,
-                      tip_diameter)
-        x, y, z = placement.to_palm(np.asarray(result.points, dtype=float)[-1:])[0].tolist()
-        tip.pose.position = Point(x=x, y=y, z=z)
-        out.append(tip)
-        circle = _marker(palm_frame, stamp_ns, names['circle'], index, Marker.LINE_STRIP,
-                         (0.2, 0.4, 1.0, 0.6), 0.5 * width)
-        fit = fit_circle(result.points)
-        radius = abs(1.0 / fit.curvature) if fit.curvature else math.inf
-        if np.all(np.isfinite(fit.center)) and radius <= MAX_CIRCLE_RADIUS:
-            angle = np.linspace(0.0, 2.0 * math.pi, _CIRCLE_POINTS)
-            ring = fit.center + radius * np.column_stack([np.cos(angle), np.sin(angle)])
-            circle.points = _points(placement.to_palm(ring))
-        else:
-            circle.action = Marker.DELETE
-        out.append(circle)
-    return out
+
+def serialized_gripper_shape(fingers, palm_frame, width=0.002, tip_diameter=0.006):
+    """
+    Serialize the MarkerArray of `gripper_shape_markers` straight to CDR bytes.
+
+    Parameters and markers as for `gripper_shape_markers`, at some 1/20 of its cost.
+
+    Returns
+    -------
+    bytes
+        CDR of a ``visualization_msgs/MarkerArray``; ``Publisher.publish`` accepts them.
+
+    """
+    return _serialized_marker_array(
+        _gripper_shape_parts(fingers, palm_frame, width, tip_diameter))

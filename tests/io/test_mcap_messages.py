@@ -9,10 +9,14 @@ import numpy as np
 from numpy.testing import assert_allclose
 import pytest
 from rclpy.serialization import deserialize_message, serialize_message
+from visualization_msgs.msg import Marker, MarkerArray
 
 from fpc_gripper.io.mcap_writer import message_definition
-from fpc_gripper.io.messages import (gripper_topics, ns_to_time, rigidity_message,
-                                     serialized_shape, shape_marker, shape_message,
+from fpc_gripper.io.messages import (FingerPlacement, gripper_shape_markers,
+                                     GRIPPER_SHAPE_NAMESPACES, gripper_topics,
+                                     MAX_CIRCLE_RADIUS, ns_to_time, rigidity_message,
+                                     serialized_gripper_shape, serialized_shape,
+                                     serialized_shape_markers, shape_marker, shape_message,
                                      tangent_angles, time_to_ns)
 
 
@@ -69,6 +73,63 @@ def test_rigidity_and_marker():
     assert marker.header.frame_id == 'finger_2' and marker.id == 2
     assert len(marker.points) == 17 and marker.points[3].y == 0.0
     assert (marker.color.r, marker.color.g, marker.color.a) == (1.0, 0.5, 1.0)
+
+
+def _fingers(kappas):
+    """`gripper_shape_markers` input: one FakeResult finger per curvature, around the palm."""
+    colors = [(0.1, 0.7, 0.2, 1.0), (1.0, 0.55, 0.0, 1.0)]
+    return [(i, FakeResult(kappa, n=9 + 40 * i), 1_700_000_000_123_456_789 + i,
+             FingerPlacement(0.031, 2.0 * math.pi * i / len(kappas)), colors[i % 2])
+            for i, kappa in enumerate(kappas)]
+
+
+def _through_rclpy(markers):
+    # Object fields hold Python floats until serialized (colors are float32 in CDR): compare
+    # what a subscriber receives.
+    return deserialize_message(serialize_message(MarkerArray(markers=markers)), MarkerArray)
+
+
+@pytest.mark.parametrize('palm', ['', 'p', 'palm', 'pälm_frame', 'a' * 13])
+@pytest.mark.parametrize('kappas', [[12.5], [12.5, 0.0, -30.0], [1.0, 5.0, 20.0, 1e-9]])
+def test_serialized_markers_decode_to_the_marker_objects(palm, kappas):
+    fingers = _fingers(kappas)
+    shape = serialized_gripper_shape(fingers, palm)
+    assert deserialize_message(shape, MarkerArray) == _through_rclpy(
+        gripper_shape_markers(fingers, palm))
+    markers = serialized_shape_markers(fingers, palm)
+    assert deserialize_message(markers, MarkerArray) == _through_rclpy(
+        [shape_marker(r, palm, t, i, color=c, placement=p) for i, r, t, p, c in fingers])
+    # A second, independent CDR reader: mcap's own.
+    decode = generate_dynamic('visualization_msgs/msg/MarkerArray',
+                              message_definition('visualization_msgs/msg/MarkerArray'))
+    decoded = decode['visualization_msgs/msg/MarkerArray'](shape)
+    assert len(decoded.markers) == 3 * len(kappas)
+    flat = [i for i, kappa in enumerate(kappas) if abs(kappa) < 1.0 / MAX_CIRCLE_RADIUS]
+    for marker in decoded.markers:
+        assert marker.header.frame_id == palm and marker.frame_locked
+        assert marker.text == '' and marker.mesh_file.filename == ''
+        assert len(marker.colors) == len(marker.mesh_file.data) == 0
+        if marker.ns == GRIPPER_SHAPE_NAMESPACES['circle']:
+            assert (marker.action == Marker.DELETE) == (marker.id in flat)
+
+
+def test_gripper_shape_circle_and_tip_are_the_arc_s():
+    kappa, placement = 12.5, FingerPlacement(0.031, 0.7)
+    fingers = [(0, FakeResult(kappa, n=33), 5, placement, (0.1, 0.7, 0.2, 1.0))]
+    markers = deserialize_message(serialized_gripper_shape(fingers, 'palm'), MarkerArray).markers
+    midplane, tip, circle = markers
+    # The arc's centre is (0, -1/kappa) in the finger's (X, Z); every drawn point of the
+    # circle is 1/kappa from it in the palm frame, in the finger's plane.
+    centre = placement.to_palm([[0.0, -1.0 / kappa]])[0]
+    ring = np.array([[p.x, p.y, p.z] for p in circle.points])
+    assert_allclose(np.linalg.norm(ring - centre, axis=1), 1.0 / kappa, rtol=1e-9)
+    normal = placement.rotation[:, 1]
+    assert_allclose((ring - centre) @ normal, 0.0, atol=1e-12)
+    end = placement.to_palm(FakeResult(kappa, n=33).points[-1:])[0]
+    p = tip.pose.position
+    assert_allclose([p.x, p.y, p.z], end, rtol=0, atol=1e-15)
+    assert [(q.x, q.y, q.z) for q in midplane.points][-1] == pytest.approx(tuple(end),
+                                                                           abs=1e-15)
 
 
 def test_default_topic_list():
