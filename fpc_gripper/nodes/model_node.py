@@ -341,6 +341,13 @@ class ModelNode(Node):
                              n_segments=param('n_segments').value,
                              pressure_model=param('pressure_model').value)
 
+    def destroy_node(self):
+        """Close the input guard's lost-message handles, then destroy the node."""
+        guard = getattr(self, '_guard', None)   # None when the set-up failed before it
+        if guard is not None:
+            guard.close()
+        return super().destroy_node()
+
     def _create_solver(self, design):
         """Build the solver of one design through the finger pipeline (or the injected one)."""
         return self._solver_factory(design, self.settings())

@@ -9,6 +9,7 @@ import threading
 import time
 
 from diagnostic_msgs.msg import DiagnosticStatus
+from geometry_msgs.msg import WrenchStamped
 from helpers import read_with_rosbags
 from nav_msgs.msg import Path
 import pytest
@@ -118,14 +119,17 @@ def test_the_gripper_executable_runs_the_loop_in_one_process(context, tmp_path):
     probe = rclpy.create_node('composed_probe', context=context)
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(probe)
-    shapes, states = [], []
+    shapes, states, forces = [], [], []
     probe.create_subscription(Path, f'{namespace}/finger_0/shape', shapes.append, 10)
     probe.create_subscription(DiagnosticStatus, f'{namespace}/controller_state',
                               states.append, 10)
+    # The object answers a pressure once it has the finger's shape: wait for its first.
+    probe.create_subscription(WrenchStamped, f'{namespace}/finger_0/tip_force',
+                              forces.append, 10)
     goal = probe.create_publisher(Float64, f'{namespace}/aperture_command', 10)
     try:
         deadline = time.monotonic() + STARTUP_S
-        while not (shapes and states):
+        while not (shapes and states and forces):
             assert time.monotonic() < deadline, ''.join(output)
             assert process.poll() is None, ''.join(output)
             goal.publish(Float64(data=0.1))

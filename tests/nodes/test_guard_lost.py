@@ -1,0 +1,107 @@
+"""Lost input messages: counted by polling, never by an executor-armed event (a deadlock)."""
+
+import subprocess
+import sys
+import time
+
+import pytest
+import rclpy
+from rclpy.context import Context
+from rclpy.event_handler import EventHandler
+from rclpy.event_handler import QoSSubscriptionEventType
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import FluidPressure
+
+from fpc_gripper.nodes.guard import InputGuard
+from fpc_gripper.nodes.guard import LOST_POLL_PERIOD_S
+from fpc_gripper.nodes.model_node import ModelNode
+from fpc_gripper.nodes.runner import make_executor
+
+TOPIC = '/guard_lost/flood'
+SENT = 20_000
+# A second process floods a best-effort, depth-1 topic with 2 kB messages faster than the
+# subscriber's DDS thread takes them: the middleware reports the gaps as lost samples.
+FLOODER = """
+import sys, time
+import rclpy
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import FluidPressure
+rclpy.init()
+node = rclpy.create_node('flooder')
+pub = node.create_publisher(FluidPressure, sys.argv[1], QoSProfile(
+    depth=1, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.BEST_EFFORT))
+deadline = time.monotonic() + 60.0
+while pub.get_subscription_count() == 0 and time.monotonic() < deadline:
+    time.sleep(0.05)
+time.sleep(0.5)
+msg = FluidPressure()
+msg.header.frame_id = 'x' * 2000
+for i in range(int(sys.argv[2])):
+    msg.fluid_pressure = float(i)
+    pub.publish(msg)
+time.sleep(1.0)
+node.destroy_node()
+rclpy.shutdown()
+"""
+
+
+@pytest.fixture
+def context():
+    ctx = Context()
+    rclpy.init(context=ctx)
+    yield ctx
+    rclpy.shutdown(context=ctx)
+
+
+def _armed_handlers(node):
+    """Lost-message handlers an executor would arm: among the node's waitables."""
+    lost = QoSSubscriptionEventType.RCL_SUBSCRIPTION_MESSAGE_LOST
+    # Publisher event types are another enum whose values overlap: compare the type too.
+    return [w for w in node.waitables if isinstance(w, EventHandler)
+            and type(w.event_type) is type(lost) and w.event_type == lost]
+
+
+def test_model_node_arms_no_lost_message_event(context):
+    # The armed MESSAGE_LOST event is what deadlocked the composed gripper in a soak:
+    # rmw_fastrtps locks its event mutex and the DataReader's in opposite orders.
+    node = ModelNode(context=context, namespace='/guard_arms')
+    try:
+        assert len(node._pressure_subs) == len(node._force_subs) == 3
+        assert _armed_handlers(node) == []
+    finally:
+        node.destroy_node()
+
+
+def test_lost_messages_are_counted_while_the_executor_keeps_running(context):
+    node = rclpy.create_node('guard_lost', context=context)
+    guard = InputGuard(max_payload_bytes=10_000)
+    received, lost = [], []
+    guard.subscribe(node, FluidPressure, TOPIC, QoSProfile(
+        depth=1, history=HistoryPolicy.KEEP_LAST, reliability=ReliabilityPolicy.BEST_EFFORT),
+        received.append, pytest.fail, lost.append)
+    ticks = []
+    node.create_timer(0.01, lambda: ticks.append(time.monotonic()))
+    executor, _ = make_executor([node])
+    flooder = subprocess.Popen([sys.executable, '-c', FLOODER, TOPIC, str(SENT)])
+    try:
+        deadline = time.monotonic() + 120.0
+        while flooder.poll() is None and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.05)
+        assert flooder.wait(timeout=10.0) == 0
+        # One more poll period, so the last losses are read.
+        end = time.monotonic() + 2 * LOST_POLL_PERIOD_S + 0.2
+        while time.monotonic() < end:
+            executor.spin_once(timeout_sec=0.05)
+        assert _armed_handlers(node) == []
+        assert received and all(m.header.frame_id == 'x' * 2000 for m in received[:5])
+        assert sum(lost) == guard.lost > 0 and all(count > 0 for count in lost)
+        # What was lost was not received: a loss count is never a double count.
+        assert len(received) + guard.lost <= SENT
+        # The timer kept ticking through the flood: the executor was never stuck.
+        assert len(ticks) > 50
+    finally:
+        if flooder.poll() is None:
+            flooder.kill()
+        guard.close()
+        executor.shutdown()
+        node.destroy_node()
