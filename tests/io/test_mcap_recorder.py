@@ -33,7 +33,7 @@ def context():
     rclpy.try_shutdown(context=ctx)
 
 
-def spin_until(executor, condition, timeout=10.0):
+def spin_until(executor, condition, timeout=60.0):
     deadline = time.monotonic() + timeout
     while not condition():
         if time.monotonic() > deadline:
