@@ -34,6 +34,7 @@ from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
 from rclpy.serialization import serialize_message
 from sensor_msgs.msg import FluidPressure
+from soak import slope_per_hour  # bench/ is sys.path[0] when a bench script runs
 from std_msgs.msg import Float64
 
 from fpc_gripper.io.messages import serialized_shape, STATE_QOS
@@ -52,13 +53,6 @@ class Arc:
                                axis=1)
         self.tangent = -kappa * s
         self.curvature = kappa
-
-
-def slope_per_hour(times, values):
-    """Least-squares slope of values against times [s], per hour (NaN with < 3 points)."""
-    if len(times) < 3:
-        return math.nan
-    return float(np.polyfit(times, values, 1)[0] * 3600.0)
 
 
 def publish(node, fingers, rate, running, sent):
