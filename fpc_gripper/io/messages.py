@@ -519,6 +519,11 @@ class _Cdr:
         self.buffer += bytes(-len(self.buffer) % size)
         self.buffer += struct.pack(fmt, *values)
 
+    def header(self, stamp_ns, frame_id):
+        """Append a ``std_msgs/Header``, 4-aligned, as `_cdr_header` encodes it."""
+        self.buffer += bytes(-len(self.buffer) % 4)
+        self.buffer += _cdr_header(stamp_ns, frame_id)
+
     def string(self, text):
         data = text.encode('utf-8') + b'\x00'
         self.pack('<I', 4, len(data))
@@ -531,9 +536,7 @@ class _Cdr:
 
 def _marker_cdr(parts, cdr):
     """Append the CDR of the ``Marker`` of `_MarkerParts`, as `_to_marker` builds it."""
-    sec, nanosec = divmod(int(parts.stamp_ns), 1_000_000_000)
-    cdr.pack('<iI', 4, sec, nanosec)
-    cdr.string(parts.frame_id)
+    cdr.header(parts.stamp_ns, parts.frame_id)
     cdr.string(parts.namespace)
     cdr.pack('<iii', 4, int(parts.marker_id), parts.kind,
              Marker.DELETE if parts.delete else Marker.ADD)
