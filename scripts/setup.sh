@@ -28,6 +28,8 @@ if [ -n "$extra" ]; then
 fi
 "${pip[@]}" install -q --no-deps -r requirements.lock
 "${pip[@]}" install -q --no-deps --use-pep517 --no-build-isolation -e .
+# control_msgs (GripperCommand) and tf2_msgs (TFMessage), which PyPI lacks: about 20 s, once.
+scripts/build_interfaces.sh
 # The compiled engine, once (about 2.6 min on 2 cores; nothing compiles at run time after).
 .venv/bin/python -m fpc_gripper.model.build --if-stale
 if ! check="$("${pip[@]}" check)"; then
