@@ -6,7 +6,7 @@ import struct
 from typing import NamedTuple
 
 from builtin_interfaces.msg import Time
-from geometry_msgs.msg import Point, PoseStamped, TransformStamped, Vector3Stamped
+from geometry_msgs.msg import Point, PoseStamped, Vector3Stamped
 from nav_msgs.msg import Path
 import numpy as np
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -30,9 +30,10 @@ DEFAULT_ATMOSPHERIC_PRESSURE = 101325.0
 #: Per-finger topics, relative to the node namespace, under ``finger_<i>/``.
 FINGER_TOPICS = ('pressure_command', 'pressure', 'tip_force', 'shape', 'curvature',
                  'rigidity')
-#: Gripper-level topics (relative, except the absolute ``/diagnostics`` and ``/tf_static``).
+#: Gripper-level topics (relative, except the absolute ``/diagnostics``, ``/tf_static``
+#: and ``/tf``).
 GRIPPER_TOPICS = ('markers', 'gripper_shape', 'aperture_command', 'grasp_force_command',
-                  'aperture', 'controller_state', '/diagnostics', '/tf_static')
+                  'aperture', 'controller_state', '/diagnostics', '/tf_static', '/tf')
 #: Message types of the model outputs, by per-finger topic.
 MODEL_OUTPUT_TYPES = {
     'shape': 'nav_msgs/msg/Path',
@@ -287,7 +288,7 @@ def model_messages(result, frame_id, stamp_ns, rigidity=(None, None)):
 # -- Additions for the model node: a fast serialized shape, and RViz/Foxglove markers. --------
 
 __all__ += ['GRIPPER_SHAPE_NAMESPACES', 'SHAPE_MARKER_NAMESPACE', 'FingerPlacement',
-            'gripper_shape_markers', 'palm_transform', 'serialized_gripper_shape',
+            'gripper_shape_markers', 'serialized_gripper_shape',
             'serialized_shape', 'serialized_shape_markers', 'shape_marker']
 
 #: ``ns`` of the per-finger LINE_STRIP markers on ``markers``; the marker id is the finger index.
@@ -440,36 +441,6 @@ def _quaternion(rotation):
         q[n] = (m[n, i] + m[i, n]) / (4 * r)
     q = np.array(q)
     return q if q[3] >= 0.0 else -q
-
-
-def palm_transform(placement, palm_frame, finger_frame, stamp_ns=0):
-    """
-    Build the static transform palm -> finger of a finger placement, as tf2 broadcasts it.
-
-    Parameters
-    ----------
-    placement : FingerPlacement
-        The finger's clamp.
-    palm_frame, finger_frame : str
-        Parent and child frame ids.
-    stamp_ns : int
-        Header stamp [ns].
-
-    Returns
-    -------
-    geometry_msgs.msg.TransformStamped
-        Maps finger-frame coordinates to palm-frame ones.
-
-    """
-    msg = TransformStamped()
-    msg.header.stamp = ns_to_time(stamp_ns)
-    msg.header.frame_id = palm_frame
-    msg.child_frame_id = finger_frame
-    t = msg.transform.translation
-    t.x, t.y, t.z = (float(v) for v in placement.translation)
-    r = msg.transform.rotation
-    r.x, r.y, r.z, r.w = (float(v) for v in placement.quaternion)
-    return msg
 
 
 class _MarkerParts(NamedTuple):

@@ -30,13 +30,16 @@ from fpc_gripper.io.config import load_gripper_config
 from fpc_gripper.io.messages import curvature_message
 from fpc_gripper.io.messages import FingerPlacement
 from fpc_gripper.io.messages import ns_to_time
-from fpc_gripper.io.messages import palm_transform
 from fpc_gripper.io.messages import rigidity_message
 from fpc_gripper.io.messages import serialized_gripper_shape
 from fpc_gripper.io.messages import serialized_shape
 from fpc_gripper.io.messages import serialized_shape_markers
 from fpc_gripper.io.messages import shape_message
 from fpc_gripper.io.messages import STATE_QOS
+from fpc_gripper.io.tf import palm_transform
+from fpc_gripper.io.tf import serialized_tip_tf
+from fpc_gripper.io.tf import TF_QOS
+from fpc_gripper.io.tf import TF_STATIC_QOS
 from fpc_gripper.model import PRESSURE_MODEL_NAMES
 from fpc_gripper.model.pipeline import finger_model
 from fpc_gripper.model.pipeline import MAX_SEGMENTS
@@ -200,7 +203,9 @@ class ModelNode(Node):
     and ``markers`` and ``gripper_shape`` (MarkerArray in the palm frame; at most 30 Hz
     while subscribed, 1 Hz otherwise, the newest state always sent), plus
     ``/diagnostics`` (1 Hz and on every change of a finger's level or kind of problem).
-    With tf2_ros importable it also broadcasts the static transforms palm -> finger_<i>.
+    With tf2_msgs importable it also sends tf: palm -> finger_<i> (the mounts) on
+    /tf_static, and finger_<i> -> finger_<i>_tip (the shape's last pose, stamped with the
+    answered input) on /tf with every shape.
 
     Nothing is published for a finger before its first valid pressure (its diagnostics
     say "waiting for pressure input" at WARN). Shape, curvature, rigidity and markers are
@@ -288,7 +293,7 @@ class ModelNode(Node):
         self._last_kinds = None
         self._serialize_shapes = None
         self._create_topics(names)
-        self._tf = self._broadcast_palm_transforms()
+        self._tf_pub, tf_state = self._create_tf()
         self._rate_timer = self.create_timer(1.0 / param('max_rate_hz').value, self._on_timer,
                                              clock=self._steady)
         self._rate_timer.cancel()
@@ -303,7 +308,7 @@ class ModelNode(Node):
             f'{param("pressure_model").value} pressure model, '
             f'input {self._pressure_topic}, max_rate_hz {param("max_rate_hz").value:g}, '
             f'frames {self._palm_frame} -> {", ".join(self._frames)} '
-            f'({"static tf broadcast" if self._tf else "tf2_ros not importable: no tf"}); '
+            f'({tf_state}); '
             'waiting for pressure input')
         self._publish_diagnostics(force=True)
 
@@ -386,18 +391,33 @@ class ModelNode(Node):
             functools.partial(self._on_refused, index, topic),
             functools.partial(self._on_lost, index, topic))
 
-    def _broadcast_palm_transforms(self):
-        """Send the static transforms palm -> finger_<i> if tf2_ros is importable."""
+    def _create_tf(self):
+        """
+        Send palm -> finger_<i> on /tf_static; return the /tf publisher and what was done.
+
+        tf2_ros's static broadcaster sends them where it imports. Otherwise the node
+        publishes tf2_msgs/TFMessage itself, with tf2_ros's QoS (a PyPI install gets
+        tf2_msgs from scripts/build_interfaces.sh). Without tf2_msgs there is no tf.
+        """
+        try:
+            from tf2_msgs.msg import TFMessage
+        except ImportError:
+            return None, 'tf2_msgs not importable: no tf'
+        stamp = self._now_ns()
+        mounts = [palm_transform(placement, self._palm_frame, frame, stamp)
+                  for placement, frame in zip(self._placements, self._frames)]
         try:
             from tf2_ros.static_transform_broadcaster import StaticTransformBroadcaster
         except ImportError:
-            return None
-        broadcaster = StaticTransformBroadcaster(self)
-        stamp = self._now_ns()
-        broadcaster.sendTransform([
-            palm_transform(placement, self._palm_frame, frame, stamp)
-            for placement, frame in zip(self._placements, self._frames)])
-        return broadcaster
+            self._static_tf_pub = self.create_publisher(TFMessage, '/tf_static', TF_STATIC_QOS)
+            self._static_tf_pub.publish(TFMessage(transforms=mounts))
+            how = 'tf2_msgs'
+        else:
+            self._static_tf_pub = StaticTransformBroadcaster(self)
+            self._static_tf_pub.sendTransform(mounts)
+            how = 'tf2_ros'
+        return (self.create_publisher(TFMessage, '/tf', TF_QOS),
+                f'tf through {how}: mounts on /tf_static, finger -> tip on /tf')
 
     def _rigidity_period(self):
         rate = self.get_parameter('rigidity_rate_hz').value
@@ -545,9 +565,11 @@ class ModelNode(Node):
         return shape_message(result, frame_id, stamp_ns)
 
     def _publish_shape(self, update):
-        payload = self._shape_payload(update.result, self._frames[update.index],
-                                      update.stamp_ns)
-        self._shape_pubs[update.index].publish(payload)
+        frame = self._frames[update.index]
+        self._shape_pubs[update.index].publish(
+            self._shape_payload(update.result, frame, update.stamp_ns))
+        if self._tf_pub is not None:
+            self._tf_pub.publish(serialized_tip_tf(update.result, frame, update.stamp_ns))
 
     def _publish_rigidities(self, indices):
         for index in indices:

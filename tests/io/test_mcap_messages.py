@@ -137,5 +137,5 @@ def test_default_topic_list():
     assert topics[:6] == ['finger_0/pressure_command', 'finger_0/pressure',
                           'finger_0/tip_force', 'finger_0/shape', 'finger_0/curvature',
                           'finger_0/rigidity']
-    assert len(topics) == 12 + 8 and '/diagnostics' in topics and 'markers' in topics
-    assert 'gripper_shape' in topics and '/tf_static' in topics
+    assert len(topics) == 12 + 9 and '/diagnostics' in topics and 'markers' in topics
+    assert 'gripper_shape' in topics and '/tf_static' in topics and '/tf' in topics

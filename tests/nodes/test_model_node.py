@@ -37,6 +37,8 @@ from fpc_gripper.io.config import load_gripper_config
 from fpc_gripper.io.messages import serialized_shape
 from fpc_gripper.io.messages import shape_message
 from fpc_gripper.io.messages import time_to_ns
+from fpc_gripper.io.tf import TF_QOS
+from fpc_gripper.io.tf import TF_STATIC_QOS
 from fpc_gripper.model import AdaptiveSolver, CCMSolver, choose_model, Scene
 from fpc_gripper.model.pipeline import DEFAULT_TOLERANCE
 from fpc_gripper.nodes.model_node import ModelNode
@@ -703,3 +705,40 @@ def quaternion_rotate(q, v):
     u = np.array([x, y, z])
     v = np.asarray(v, dtype=float)
     return v + 2.0 * np.cross(u, np.cross(u, v) + w * v)
+
+
+@pytest.mark.ros
+def test_tf_builds_palm_to_finger_to_tip_and_the_tip_is_the_shapes_last_pose(ros, model):
+    """A tf subscriber joins the mount (/tf_static) and the tip (/tf) of an answered input."""
+    from tf2_msgs.msg import TFMessage
+    _, probe = model
+    seen = {'/tf_static': [], '/tf': []}
+    for topic, qos in (('/tf_static', TF_STATIC_QOS), ('/tf', TF_QOS)):
+        probe.node.create_subscription(TFMessage, topic, probe._recorder(seen[topic]), qos)
+    probe.wait_connected()
+    stamp = probe.send_pressure('finger_1', ATM + 120e3)
+    last = probe.shape_stamped('finger_1', stamp).poses[-1]
+
+    def transform(topic, child, stamp_ns=None):
+        for msg in seen[topic]:
+            for t in msg.transforms:
+                if t.child_frame_id == child and (
+                        stamp_ns is None or time_to_ns(t.header.stamp) == stamp_ns):
+                    return t
+        return None
+    assert probe.wait(lambda: transform('/tf', 'finger_1_tip', stamp) is not None)
+    assert probe.wait(lambda: transform('/tf_static', 'finger_1') is not None)
+    tip = transform('/tf', 'finger_1_tip', stamp)
+    mount = transform('/tf_static', 'finger_1')
+    assert (mount.header.frame_id, tip.header.frame_id) == ('palm', 'finger_1')
+    t, p = tip.transform.translation, last.pose.position
+    assert_allclose([t.x, t.y, t.z], [p.x, p.y, p.z], rtol=0, atol=1e-9)
+    q, o = tip.transform.rotation, last.pose.orientation
+    assert_allclose([q.x, q.y, q.z, q.w], [o.x, o.y, o.z, o.w], rtol=0, atol=1e-9)
+    # The tree palm -> finger_1 -> finger_1_tip puts the tip where the controller's palm
+    # geometry (its own formula, not tf's) puts the solved tip.
+    r = mount.transform.rotation
+    offset = mount.transform.translation
+    in_palm = quaternion_rotate([r.x, r.y, r.z, r.w], [t.x, t.y, t.z]) + [
+        offset.x, offset.y, offset.z]
+    assert_allclose(in_palm, palm_points(1, [direct(120e3).points[-1]])[0], rtol=0, atol=1e-9)

@@ -82,5 +82,5 @@ def test_every_topic_is_in_the_readme_table_with_its_qos(nodes):
             assert (qos.reliability, qos.durability, qos.depth) == (
                 reliability, durability, depth), where
             seen.add(name)
-    # Every row but /tf_static (tf2_ros is not on PyPI) belongs to a node here.
-    assert set(table) - seen == {'/tf_static'}
+    # Every row belongs to a node here.
+    assert set(table) - seen == set()
