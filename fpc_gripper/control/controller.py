@@ -30,6 +30,7 @@ class Mode(str, enum.Enum):
     APERTURE = 'aperture'    # tracking an aperture
     GRASP = 'grasp'          # closing on an object, then holding a contact force
     SAFE = 'safe'            # pressure feedback lost: vent or hold until a new goal
+    HOLD = 'hold'            # a goal canceled: the present commands kept until a new goal
 
 
 class FingerPhase(str, enum.Enum):
@@ -461,6 +462,27 @@ class GripperControlLaw:
         self._start_goal(now, Mode.GRASP, FingerPhase.APPROACH)
         self._message = f'grasp goal {force:.3f} N on the object: closing'
 
+    def hold(self, now):
+        """
+        Keep every finger's present command, with no goal (a canceled goal).
+
+        The commands stop changing from the next step on, until a new goal. A finger
+        that was never commanded stays uncommanded.
+
+        Parameters
+        ----------
+        now : float
+            [s].
+
+        """
+        now = _real('now', now, '[s]')
+        self.mode = Mode.HOLD
+        self.status = GoalStatus.NONE
+        self._aperture_target = math.nan
+        self._force_target = math.nan
+        self._goal_start = now
+        self._message = 'holding the present pressures: goal canceled'
+
     # -- the step -------------------------------------------------------------------------
 
     def step(self, now, measurements):
@@ -530,6 +552,12 @@ class GripperControlLaw:
                 FingerOutput(math.nan, math.nan, math.nan, 0.0, r, f.phase, False,
                              _magnitude(m))
                 for r, f, m in zip(rhos, self._fingers, measurements)])
+        if self.mode is Mode.HOLD:
+            held = tuple(f.command for f in self._fingers)
+            return self._output(now, None if None in held else held, aperture, [
+                FingerOutput(math.nan if c is None else c, math.nan, math.nan, f.integral, r,
+                             f.phase, False, _magnitude(m))
+                for c, r, f, m in zip(held, rhos, self._fingers, measurements)])
         if self.mode is Mode.SAFE:
             commands = []
             for finger in self._fingers:

@@ -60,6 +60,7 @@ from fpc_gripper.io.config import load_gripper_config
 from fpc_gripper.model import PRESSURE_MODEL_NAMES
 from fpc_gripper.model.pipeline import MAX_SEGMENTS
 from fpc_gripper.model.pipeline import ModelSettings
+from fpc_gripper.nodes.gripper_action import GripperCommandServer
 from fpc_gripper.nodes.guard import InputGuard
 from fpc_gripper.nodes.parameters import BOUND_NAMES
 from fpc_gripper.nodes.parameters import declare_table
@@ -223,6 +224,12 @@ class GripperController(Node):
                         self._on_aperture)
         self._subscribe(Float64, 'grasp_force_command', 'grasp_force_command', _RELIABLE,
                         self._on_grasp)
+        try:
+            self._gripper_cmd = GripperCommandServer(self, self._law, self._now, self._log)
+            action = f'action {self._gripper_cmd.name}'
+        except ImportError:
+            self._gripper_cmd = None
+            action = 'control_msgs not importable: no GripperCommand action'
         self._timer = None
         self._start_timer()
         self.add_on_set_parameters_callback(self._validate_parameters)
@@ -231,7 +238,7 @@ class GripperController(Node):
         self.get_logger().info(
             f'ready: {n} fingers, palm radius {config.palm_radius * 1e3:.1f} mm, aperture '
             f'{low * 1e3:.1f}..{high * 1e3:.1f} mm, max_pressure '
-            f'{self._law.max_pressure:.0f} Pa gauge, {self._rate():g} Hz')
+            f'{self._law.max_pressure:.0f} Pa gauge, {self._rate():g} Hz, {action}')
 
     def _grasps(self, config, settings):
         """Every finger's FingerGrasp of the declared object (None for 'unknown')."""
@@ -267,6 +274,13 @@ class GripperController(Node):
     def finger_names(self):
         """Finger names in index order."""
         return self._names
+
+    def destroy_node(self):
+        """Abort a running GripperCommand goal, then destroy the node."""
+        if getattr(self, '_gripper_cmd', None) is not None:
+            self._gripper_cmd.destroy()
+            self._gripper_cmd = None
+        return super().destroy_node()
 
     # -- parameters -------------------------------------------------------------------------
 
@@ -343,6 +357,7 @@ class GripperController(Node):
         check = self._after_input(self._inputs.offer_aperture(msg.data, self._now()),
                                   'aperture_command')
         if check.accepted:
+            self._preempt_action('aperture_command')
             self._log.info(f'aperture goal {msg.data * 1e3:.1f} mm '
                            f'(using {check.value * 1e3:.1f} mm)')
 
@@ -350,7 +365,12 @@ class GripperController(Node):
         check = self._after_input(self._inputs.offer_grasp_force(msg.data, self._now()),
                                   'grasp_force_command')
         if check.accepted:
+            self._preempt_action('grasp_force_command')
             self._log.info(f'grasp goal {msg.data:.3f} N total normal force')
+
+    def _preempt_action(self, topic):
+        if self._gripper_cmd is not None:
+            self._gripper_cmd.preempt(f'preempted by {topic}')
 
     def _on_refused(self, source, check):
         self._after_input(self._inputs.reject(source, check.rejection, check.detail), source)
@@ -385,6 +405,8 @@ class GripperController(Node):
         status = self._status(out)
         self._state_pub.publish(status)
         self._report(out, status, now)
+        if self._gripper_cmd is not None:
+            self._gripper_cmd.step(out)
 
     def _status(self, out):
         # A rejected input is a WARN until its topic delivers a good one.

@@ -6,6 +6,7 @@ import itertools
 import math
 import time
 
+from action_msgs.msg import GoalStatus
 from control_sim import circumdiameter, fresh_solver
 from diagnostic_msgs.msg import DiagnosticArray
 from diagnostic_msgs.msg import DiagnosticStatus
@@ -13,6 +14,7 @@ from geometry_msgs.msg import WrenchStamped
 import numpy as np
 import pytest
 import rclpy
+from rclpy.action import ActionClient
 from rclpy.exceptions import ParameterException
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.executors import TimeoutException
@@ -477,3 +479,119 @@ def test_parameters_are_validated(ros):
         assert descriptor.floating_point_range[0].to_value == limit
     finally:
         node.destroy_node()
+
+
+# -- the GripperCommand action, from an rclpy ActionClient -------------------------------------
+
+class GripperClient:
+    """An ActionClient of the rig's controller, spun by the rig's loop-time steps."""
+
+    def __init__(self, rig):
+        from control_msgs.action import GripperCommand
+        self.rig = rig
+        self.action = GripperCommand
+        self.client = ActionClient(rig.probe, GripperCommand, 'gripper_controller/gripper_cmd')
+        self.feedback = []
+        rig._spin_until(self.client.server_is_ready, 'the action server is not on the graph')
+
+    def send(self, position, max_effort=0.0):
+        goal = self.action.Goal()
+        goal.command.position, goal.command.max_effort = position, max_effort
+        future = self.client.send_goal_async(
+            goal, feedback_callback=lambda msg: self.feedback.append(
+                (self.rig.now(), msg.feedback)))
+        self.rig._spin_until(future.done, 'no goal response')
+        return future.result()
+
+    def result(self, handle, within):
+        future = handle.get_result_async()
+        self.rig.advance_until(future.done, within, 'the goal ends')
+        return future.result()
+
+
+def test_gripper_command_goal_reaches_80_mm_with_feedback(rig):
+    r = rig()
+    client = GripperClient(r)
+    handle = client.send(0.080)
+    assert handle.accepted
+    start = r.now()
+    done = client.result(handle, 10.0)
+    assert done.status == GoalStatus.STATUS_SUCCEEDED
+    assert done.result.reached_goal and not done.result.stalled
+    assert done.result.position == pytest.approx(0.080, abs=1.0e-3)
+    # Independent of the controller's estimate: the aperture of the measured pressures.
+    _, pressures = r.samples(r.now() - 0.1)
+    assert independent_apertures(fresh_solver(CONFIG.fingers[0].design),
+                                 pressures[-1:])[0] == pytest.approx(0.080, abs=1.0e-3)
+    # Feedback at >= 10 Hz of loop time while it ran.
+    times = np.array([t for t, _ in client.feedback])
+    assert times.size >= 10 * (r.now() - start) - 1
+    assert np.diff(np.concatenate([[start], times])).max() <= 0.1 + 1e-9
+
+
+def test_gripper_command_stalls_on_the_virtual_cylinder_at_max_effort(rig):
+    diameter, effort = 0.040, 1.5
+    r = rig(virtual_object=diameter, object='cylinder', object_diameter=diameter)
+    client = GripperClient(r)
+    opened = client.send(0.080)
+    assert client.result(opened, 10.0).result.reached_goal
+    done = client.result(client.send(0.020, effort), 15.0)
+    assert done.status == GoalStatus.STATUS_SUCCEEDED
+    assert done.result.stalled and not done.result.reached_goal
+    assert done.result.effort == pytest.approx(effort, rel=0.10)
+    # The fingers stopped at the object, far from the 20 mm goal.
+    assert done.result.position > 0.030
+    # Independent: the virtual object's published contact forces, summed over the fingers.
+    published = [math.hypot(m.wrench.force.x, m.wrench.force.z)
+                 for msgs in r.tip_forces.values() for m in msgs[-1:]]
+    assert sum(published) == pytest.approx(effort, rel=0.10)
+
+
+def test_gripper_command_cancel_holds_the_pressures_within_100_ms(rig):
+    r = rig()
+    client = GripperClient(r)
+    assert client.result(client.send(0.100), 10.0).result.reached_goal
+    handle = client.send(0.040)
+    r.advance(0.2)                                  # mid-motion: the fingers are closing
+    moving = [m.fluid_pressure for m in r.commands[FINGERS[0]][-3:]]
+    assert moving[0] - moving[-1] > 1.0e3
+    canceled = handle.cancel_goal_async()
+    r._spin_until(canceled.done, 'no cancel response')
+    assert len(canceled.result().goals_canceling) == 1
+    r.advance(0.1)
+    held = {n: r.commands[n][-1].fluid_pressure for n in FINGERS}
+    r.advance(0.5)
+    for name in FINGERS:
+        # Exact: a held command is the same stored double, published again.
+        assert all(m.fluid_pressure == held[name] for m in r.commands[name][-25:])
+    done = client.result(handle, 1.0)
+    assert done.status == GoalStatus.STATUS_CANCELED
+    assert r.state()['mode'] == 'hold'
+
+
+def test_gripper_command_a_new_goal_preempts_the_running_one(rig):
+    r = rig()
+    client = GripperClient(r)
+    first = client.send(0.100)
+    r.advance(0.1)
+    second = client.send(0.060)
+    assert second.accepted
+    assert client.result(first, 1.0).status == GoalStatus.STATUS_ABORTED
+    done = client.result(second, 10.0)
+    assert done.status == GoalStatus.STATUS_SUCCEEDED and done.result.reached_goal
+    assert done.result.position == pytest.approx(0.060, abs=1.0e-3)
+    # The simple topic preempts a goal too.
+    third = client.send(0.090)
+    r.advance(0.1)
+    r.goal('aperture', 0.070)
+    assert client.result(third, 1.0).status == GoalStatus.STATUS_ABORTED
+
+
+def test_gripper_command_out_of_range_is_rejected(rig):
+    r = rig()
+    client = GripperClient(r)
+    low, high = r.controller.law.aperture_range()
+    for position, effort in ((high + 0.01, 0.0), (low - 0.01, 0.0), (0.08, -1.0),
+                             (float('nan'), 0.0)):
+        assert not client.send(position, effort).accepted
+    assert r.state()['mode'] == 'idle'
