@@ -45,6 +45,8 @@ setup(
         ('share/' + package_name + '/msg_configs', glob('msg_configs/*.yaml')),
         ('share/' + package_name + '/launch', glob('launch/*.launch.py')),
         ('share/' + package_name + '/config', glob('config/*.yaml')),
+        ('share/' + package_name + '/urdf', glob('urdf/*.urdf')),
+        ('share/' + package_name + '/rviz', glob('rviz/*.rviz')),
     ],
     install_requires=['setuptools', 'numpy', 'scipy', 'numba', 'PyYAML', 'pandas', 'tqdm'],
     # fpc-design: sweeps on a Dask cluster (--scheduler), parquet tables (--format parquet).

@@ -2,8 +2,8 @@
 
 import pathlib
 
-__all__ = ['COMMON_ARGUMENTS', 'arguments', 'composed_parameters', 'config_file',
-           'node_parameters', 'share_directory']
+__all__ = ['COMMON_ARGUMENTS', 'DESCRIPTION_ARGUMENTS', 'arguments', 'composed_parameters',
+           'config_file', 'description_actions', 'node_parameters', 'share_directory']
 
 PACKAGE = 'fpc_gripper'
 #: ``(name, default, description)`` of the launch arguments every launch file declares;
@@ -19,6 +19,66 @@ COMMON_ARGUMENTS = (
     ('frame_prefix', '', 'Prefix of every frame id (<prefix>palm, <prefix>finger_<i>), so '
      'that two grippers can share a tf tree.'),
 )
+
+#: Launch arguments of `description_actions`.
+DESCRIPTION_ARGUMENTS = (
+    ('description', 'true', 'Publish the URDF of gripper_config (frames prefixed) on '
+     'robot_description with robot_state_publisher, where it is installed.', ('true', 'false')),
+    ('rviz', 'false', 'Start RViz with share/fpc_gripper/rviz/gripper.rviz, where it is '
+     'installed.', ('true', 'false')),
+)
+
+
+def _true(text):
+    return str(text).lower() in ('true', '1', 'yes')
+
+
+def _installed(package):
+    try:
+        from ament_index_python.packages import get_package_prefix
+        get_package_prefix(package)
+    except (ImportError, LookupError, OSError):
+        return False
+    return True
+
+
+def description_actions(context):
+    """
+    Return robot_state_publisher with the gripper's URDF and, with ``rviz:=true``, RViz.
+
+    Each runs only where its package is installed; otherwise one log line says so.
+    """
+    from launch.actions import LogInfo
+    from launch_ros.actions import Node
+
+    from fpc_gripper.io.config import load_gripper_config
+    from fpc_gripper.io.urdf import gripper_urdf
+
+    def value(name, default=''):
+        return context.launch_configurations.get(name, default)
+
+    actions = []
+    namespace = value('namespace')
+    if _true(value('description', 'true')):
+        if _installed('robot_state_publisher'):
+            urdf = gripper_urdf(load_gripper_config(value('gripper_config') or None),
+                                value('frame_prefix'))
+            actions.append(Node(
+                package='robot_state_publisher', executable='robot_state_publisher',
+                namespace=namespace, output='screen',
+                parameters=[{'robot_description': urdf,
+                             'use_sim_time': _true(value('use_sim_time'))}]))
+        else:
+            actions.append(LogInfo(msg='robot_state_publisher is not installed: no '
+                                       'robot_description (description:=false hides this)'))
+    if _true(value('rviz', 'false')):
+        if _installed('rviz2'):
+            actions.append(Node(package='rviz2', executable='rviz2', namespace=namespace,
+                                arguments=['-d', str(share_directory() / 'rviz' /
+                                                     'gripper.rviz')]))
+        else:
+            actions.append(LogInfo(msg='rviz2 is not installed: no RViz'))
+    return actions
 
 
 def share_directory():

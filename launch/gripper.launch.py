@@ -4,7 +4,8 @@ Launch the gripper: regulator_bridge, model_node and gripper_controller (and mca
     ros2 launch fpc_gripper gripper.launch.py [backend:=sim|modbus] [modbus_config:=FILE]
         [namespace:=NS] [gripper_config:=FILE] [params_file:=FILE] [record:=true]
         [record_path:=FILE_OR_DIR] [use_sim_time:=true] [frame_prefix:=PREFIX]
-        [autostart:=true|false] [composed:=true|false]
+        [autostart:=true|false] [composed:=true|false] [description:=true|false]
+        [rviz:=true|false]
 
 The regulator bridge is a lifecycle node. With autostart (the default) it configures and
 activates itself as it starts (auto_activate), in its own process: no round trip through
@@ -17,7 +18,10 @@ params_file, then the launch arguments. composed:=true starts the same nodes as 
 process, the ``gripper`` executable (one interpreter, one executor, one set of DDS
 threads); its parameter files are the same, and its launch-argument values
 reach the nodes as they would reach the separate ones (one more parameter file, keyed
-/**/<node name>). Nothing is imported from launch until
+/**/<node name>). description:=true (the default) also runs robot_state_publisher with the
+gripper's URDF, generated from gripper_config with the frame prefix; rviz:=true starts RViz
+with share/fpc_gripper/rviz/gripper.rviz (each where installed). Nothing is imported from
+launch until
 generate_launch_description() runs, so the file imports without launch installed.
 """
 
@@ -29,7 +33,9 @@ def generate_launch_description():
     from launch.actions import Shutdown
     from launch_ros.actions import LifecycleNode, Node
 
-    from fpc_gripper.launch_support import arguments, composed_parameters, node_parameters
+    from fpc_gripper.launch_support import (arguments, composed_parameters,
+                                            description_actions, DESCRIPTION_ARGUMENTS,
+                                            node_parameters)
 
     def nodes(context):
         value = context.launch_configurations.get
@@ -50,7 +56,8 @@ def generate_launch_description():
                 per_node['mcap_recorder'] = recorder
             return [Node(package='fpc_gripper', executable='gripper', namespace=namespace,
                          output='screen', arguments=['--record'] if record else [],
-                         parameters=composed_parameters(per_node))]
+                         parameters=composed_parameters(per_node)),
+                    *description_actions(context)]
         actions = [
             LifecycleNode(
                 package='fpc_gripper', executable='regulator_bridge', name='regulator_bridge',
@@ -66,7 +73,7 @@ def generate_launch_description():
             actions.append(Node(
                 package='fpc_gripper', executable='mcap_recorder', name='mcap_recorder',
                 namespace=namespace, output='screen', parameters=recorder))
-        return actions
+        return actions + description_actions(context)
 
     return LaunchDescription(arguments((
         ('backend', 'sim', 'Regulator backend.', ('sim', 'modbus')),
@@ -79,4 +86,5 @@ def generate_launch_description():
          ('true', 'false')),
         ('composed', 'false', 'Run the nodes in one process (the gripper executable).',
          ('true', 'false')),
+        *DESCRIPTION_ARGUMENTS,
     )) + [OpaqueFunction(function=nodes)])

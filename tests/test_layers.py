@@ -7,15 +7,16 @@ import pytest
 
 PACKAGE = pathlib.Path(__file__).resolve().parents[1] / 'fpc_gripper'
 #: Layers, bottom up: a package imports only from its own or a lower one. The command-line
-#: tools (every `cli.py`) sit above all but the nodes.
-RANK = {'safe_yaml': 0, 'launch_support': 0, 'data': 0, 'model': 1, 'io': 2, 'services': 2,
+#: tools (every `cli.py`) sit above all but the nodes; the launch files' support (it builds
+#: the URDF from the gripper config) sits with the nodes.
+RANK = {'safe_yaml': 0, 'data': 0, 'model': 1, 'io': 2, 'services': 2,
         'grasp': 3, 'regulators': 3, 'control': 4, 'design': 4, 'calibration': 4,
-        'tools': 5, 'nodes': 6}
+        'tools': 5, 'nodes': 6, 'launch_support': 6}
 #: Packages below the nodes: ROS-free services, physics, studies and tools' cores.
 ROS_FREE = ('model', 'services', 'regulators', 'control', 'grasp', 'design', 'calibration')
 ROS_MODULES = ('rclpy', 'std_msgs', 'sensor_msgs', 'geometry_msgs', 'nav_msgs',
                'visualization_msgs', 'diagnostic_msgs', 'rcl_interfaces', 'lifecycle_msgs',
-               'tf2_ros', 'launch', 'launch_ros')
+               'tf2_ros', 'tf2_msgs', 'control_msgs', 'action_msgs', 'launch', 'launch_ros')
 
 
 def _module(path):

@@ -129,9 +129,11 @@ def test_share_and_resource_index(prefix):
     ('launch', '*.launch.py', ['gripper.launch.py', 'model.launch.py']),
     ('config', '*.yaml', ['gripper_controller.yaml', 'mcap_recorder.yaml', 'model_node.yaml',
                           'regulator_bridge.yaml']),
+    ('urdf', '*.urdf', ['fpc_gripper.urdf']),
+    ('rviz', '*.rviz', ['gripper.rviz']),
 ])
 def test_launch_and_parameter_files_are_installed(prefix, folder, pattern, expected):
-    """Where ros2 launch and launch_support look: share/fpc_gripper/{launch,config}."""
+    """Where ros2 launch and launch_support look: share/fpc_gripper/{launch,config,...}."""
     share = prefix / 'share' / 'fpc_gripper' / folder
     assert sorted(p.name for p in share.glob(pattern)) == expected
     for name in expected:
@@ -160,7 +162,7 @@ def test_launch_files_import_without_launch(prefix, name):
 @pytest.mark.parametrize('name, arguments', [
     ('gripper.launch.py', ['namespace', 'gripper_config', 'params_file', 'use_sim_time',
                            'frame_prefix', 'backend', 'modbus_config', 'record', 'record_path',
-                           'autostart', 'composed']),
+                           'autostart', 'composed', 'description', 'rviz']),
     ('model.launch.py', ['namespace', 'gripper_config', 'params_file', 'use_sim_time',
                          'frame_prefix', 'pressure_input']),
 ])
