@@ -155,7 +155,7 @@ class CommandGoal:
             return None
         if out.status in (GoalStatus.REACHED, GoalStatus.STALLED):
             return self._report(out, stalled=True, outcome=Outcome.SUCCEEDED,
-                                message=out.message)
+                                message=f'stalled on an object, holding {out.message}')
         if not contact and math.isfinite(out.aperture) and out.aperture <= self.position:
             # The object went away: back to the aperture goal.
             self.law.set_aperture(self.position, now)

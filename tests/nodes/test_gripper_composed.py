@@ -8,12 +8,15 @@ import sys
 import threading
 import time
 
+from action_msgs.msg import GoalStatus
+from control_msgs.action import GripperCommand
 from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import WrenchStamped
 from helpers import read_with_rosbags
 from nav_msgs.msg import Path
 import pytest
 import rclpy
+from rclpy.action import ActionClient
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from std_msgs.msg import Float64
@@ -97,9 +100,18 @@ def _gripper_process(tmp_path, *args):
                             cwd=tmp_path)
 
 
+def _spin_for(executor, future, output):
+    """Spin until `future` is done (a hang guard in wall time, no judgement); its result."""
+    deadline = time.monotonic() + STARTUP_S
+    while not future.done():
+        assert time.monotonic() < deadline, ''.join(output)
+        executor.spin_once(timeout_sec=0.1)
+    return future.result()
+
+
 @pytest.mark.ros
 def test_the_gripper_executable_runs_the_loop_in_one_process(context, tmp_path):
-    """Goal in, shapes out, Ctrl-C twice: exit 0 and a closed recording of every node."""
+    """Goals in (a topic, the action), shapes out, Ctrl-C twice: exit 0, a closed recording."""
     namespace = '/composed'
     recording = tmp_path / 'composed.mcap'
     # Each node's section reaches that node only, in the namespace too.
@@ -137,6 +149,18 @@ def test_the_gripper_executable_runs_the_loop_in_one_process(context, tmp_path):
         names = set(probe.get_node_names())
         assert {'regulator_bridge', 'model_node', 'gripper_controller', 'virtual_object',
                 'mcap_recorder'} <= names
+        # The GripperCommand action, served on the process's EventsExecutor.
+        client = ActionClient(probe, GripperCommand,
+                              f'{namespace}/gripper_controller/gripper_cmd')
+        request = GripperCommand.Goal()
+        request.command.position = 0.090
+        handle = _spin_for(executor, client.send_goal_async(request), output)
+        assert handle.accepted
+        done = _spin_for(executor, handle.get_result_async(), output)
+        assert done.status == GoalStatus.STATUS_SUCCEEDED, ''.join(output)
+        assert done.result.reached_goal
+        assert done.result.position == pytest.approx(0.090, abs=1.0e-3)
+        client.destroy()
         process.send_signal(signal.SIGINT)
         time.sleep(0.030)
         process.send_signal(signal.SIGINT)
@@ -156,6 +180,7 @@ def test_the_gripper_executable_runs_the_loop_in_one_process(context, tmp_path):
     topics = {topic for topic, *_ in read_with_rosbags(recording)}
     for suffix in ('pressure_command', 'pressure', 'tip_force', 'shape', 'curvature'):
         assert f'{namespace}/finger_0/{suffix}' in topics, sorted(topics)
+    assert {'/tf', '/tf_static'} <= topics, sorted(topics)
     # The recorder's stop line: everything it received is in the file.
     stop = re.search(r'closed \S+: received (\d+), written (\d+), dropped (\d+)', log)
     assert stop and stop[1] == stop[2] and stop[3] == '0', log
