@@ -654,6 +654,20 @@ class GripperControlLaw:
         return FingerOutput(command, feedforward, error, finger.integral, rho, finger.phase,
                             saturated, normal)
 
+    def contact(self, index, pressure):
+        """
+        Return a finger's contact state on the object at a pressure, or None.
+
+        None while the finger is not in contact or no object is known or estimated yet;
+        else the frictionless contact Result of its FingerGrasp (positions in the finger
+        frame [m], ``in_contact``, forces [N]), as the law's force estimate uses it.
+        """
+        grasp = self._grasp(index)
+        if grasp is None or self._fingers[index].phase is not FingerPhase.CONTACT \
+                or pressure is None or not math.isfinite(pressure):
+            return None
+        return grasp.state(pressure)
+
     def _grasp(self, index):
         """Return a finger's FingerGrasp: the known object's, or the one estimated at contact."""
         if self.grasps is not None:

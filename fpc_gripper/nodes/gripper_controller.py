@@ -10,7 +10,11 @@ frame ``finger_<i>``: the contact force on the finger, force.x and force.z the r
 ``object_diameter``, ``object_height``; ``unknown``: a cylinder on the palm axis through
 the point where contact is felt). Outputs: ``finger_<i>/pressure_command``
 (FluidPressure, ABSOLUTE [Pa] = gauge + atmospheric_pressure), ``aperture``
-(std_msgs/Float64, the model estimate [m]), ``controller_state`` and ``/diagnostics``.
+(std_msgs/Float64, the model estimate [m]), ``contacts`` (visualization_msgs/MarkerArray:
+each finger's points in contact on the object's contact model, in its frame, at 10 Hz at
+most while any finger is in contact), ``controller_state`` and ``/diagnostics``. The
+``<node name>/gripper_cmd`` action (control_msgs/GripperCommand) is served by
+:mod:`fpc_gripper.nodes.gripper_action`.
 
 ``controller_state`` is a diagnostic_msgs/DiagnosticStatus, published every control
 step: a standard, typed message (level OK/WARN/ERROR, a message, key/value pairs) that
@@ -44,6 +48,7 @@ from rclpy.qos import QoSProfile
 from rclpy.qos import ReliabilityPolicy
 from sensor_msgs.msg import FluidPressure
 from std_msgs.msg import Float64
+from visualization_msgs.msg import MarkerArray
 
 from fpc_gripper.control.controller import ControllerConfig
 from fpc_gripper.control.controller import GoalStatus
@@ -57,6 +62,8 @@ from fpc_gripper.grasp.objects import make_object
 from fpc_gripper.grasp.objects import OBJECTS
 from fpc_gripper.io.config import default_gripper_config_path
 from fpc_gripper.io.config import load_gripper_config
+from fpc_gripper.io.contact_markers import contact_marker
+from fpc_gripper.io.messages import STATE_QOS
 from fpc_gripper.model import PRESSURE_MODEL_NAMES
 from fpc_gripper.model.pipeline import MAX_SEGMENTS
 from fpc_gripper.model.pipeline import ModelSettings
@@ -78,6 +85,8 @@ __all__ = ['GripperController', 'main']
 _RELIABLE = QoSProfile(depth=10, history=HistoryPolicy.KEEP_LAST,
                        reliability=ReliabilityPolicy.RELIABLE)
 _DIAGNOSTICS_PERIOD_S = 1.0
+#: Contact markers at 10 Hz at most, for people [s].
+_CONTACTS_PERIOD_S = 0.1
 #: Parameters copied into ControllerConfig (same names).
 _LAW_PARAMETERS = ('max_pressure', 'slew_rate_pa_s', 'approach_rate_pa_s', 'kp', 'ki',
                    'kp_force', 'ki_force', 'goal_tolerance_m',
@@ -215,6 +224,9 @@ class GripperController(Node):
         self._aperture_pub = self.create_publisher(Float64, 'aperture', _RELIABLE)
         self._state_pub = self.create_publisher(DiagnosticStatus, 'controller_state', _RELIABLE)
         self._diagnostics_pub = self.create_publisher(DiagnosticArray, '/diagnostics', _RELIABLE)
+        self._contacts_pub = self.create_publisher(MarkerArray, 'contacts', STATE_QOS)
+        self._contacts_shown = [False] * len(self._names)
+        self._last_contacts = None
         for i, (name, frame) in enumerate(zip(self._names, self._frames)):
             self._subscribe(FluidPressure, f'{name}/pressure', f'{frame}/pressure',
                             qos_profile_sensor_data, functools.partial(self._on_pressure, i))
@@ -407,6 +419,28 @@ class GripperController(Node):
         self._report(out, status, now)
         if self._gripper_cmd is not None:
             self._gripper_cmd.step(out)
+        self._publish_contacts(now)
+
+    def _contact(self, index, pressure):
+        try:
+            return self._law.contact(index, pressure)
+        except (RuntimeError, ValueError, ArithmeticError):
+            return None         # no contact state here: the finger shows none
+
+    def _publish_contacts(self, now):
+        """Send the contact points of the fingers in contact, and delete those that left."""
+        if self._last_contacts is not None and now - self._last_contacts < _CONTACTS_PERIOD_S:
+            return
+        states = [self._contact(i, m.pressure)
+                  for i, m in enumerate(self._inputs.measurements())]
+        if all(state is None for state in states) and not any(self._contacts_shown):
+            return
+        self._last_contacts = now
+        stamp = self.get_clock().now().nanoseconds
+        markers = [contact_marker(state, frame, stamp, i)
+                   for i, (state, frame) in enumerate(zip(states, self._frames))]
+        self._contacts_shown = [state is not None for state in states]
+        self._contacts_pub.publish(MarkerArray(markers=markers))
 
     def _status(self, out):
         # A rejected input is a WARN until its topic delivers a good one.

@@ -26,6 +26,7 @@ from rclpy.time import Time
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import FluidPressure
 from std_msgs.msg import Float64
+from visualization_msgs.msg import MarkerArray
 
 from fpc_gripper.grasp import make_object
 from fpc_gripper.io.config import load_gripper_config
@@ -138,6 +139,9 @@ class Rig:
                                            self.tip_forces[name].append, reliable)
         self.probe.create_subscription(DiagnosticStatus, 'controller_state',
                                        self.states.append, reliable)
+        self.contacts = []
+        self.probe.create_subscription(MarkerArray, 'contacts', self.contacts.append,
+                                       reliable)
         self.probe.create_subscription(DiagnosticArray, '/diagnostics', self._on_diag, reliable)
         self.aperture_pub = self.probe.create_publisher(Float64, 'aperture_command', reliable)
         self.force_pub = self.probe.create_publisher(Float64, 'grasp_force_command', reliable)
@@ -541,6 +545,15 @@ def test_gripper_command_stalls_on_the_virtual_cylinder_at_max_effort(rig):
     assert done.result.effort == pytest.approx(effort, rel=0.10)
     # The fingers stopped at the object, far from the 20 mm goal.
     assert done.result.position > 0.030
+    # The contact points the controller shows lie on the cylinder: at its radius from the
+    # palm axis (the finger frame's Z is radial, from the clamp at the palm radius).
+    r.advance(0.2)
+    (shown,) = r.contacts[-1:]
+    assert len(shown.markers) == len(FINGERS)
+    for marker, name in zip(shown.markers, FINGERS):
+        assert marker.header.frame_id == name and marker.points
+        radial = np.array([RADIUS + p.z for p in marker.points])
+        assert np.abs(radial - 0.5 * diameter).max() < 1.0e-4
     # Independent: the virtual object's published contact forces, summed over the fingers.
     published = [math.hypot(m.wrench.force.x, m.wrench.force.z)
                  for msgs in r.tip_forces.values() for m in msgs[-1:]]

@@ -1,4 +1,4 @@
-"""The tip transform and its CDR bytes against the shape message they come from."""
+"""The tip transform and its CDR bytes against the shape message; the contact markers."""
 
 import math
 
@@ -7,7 +7,9 @@ import numpy as np
 from numpy.testing import assert_allclose
 from rclpy.serialization import deserialize_message
 from tf2_msgs.msg import TFMessage
+from visualization_msgs.msg import Marker
 
+from fpc_gripper.io.contact_markers import contact_marker, CONTACT_NAMESPACE
 from fpc_gripper.io.messages import serialized_shape
 from fpc_gripper.io.tf import serialized_tip_tf
 from fpc_gripper.io.tf import tip_frame
@@ -54,3 +56,17 @@ def test_the_tip_frame_turns_x_onto_the_tip_tangent():
     assert_allclose([tf.transform.translation.x, tf.transform.translation.z],
                     [radius, radius], atol=1e-15)
     assert tip_frame('left/finger_1') == 'left/finger_1_tip'
+
+
+def test_contact_markers_show_the_points_in_contact_and_delete_without():
+    positions = np.array([[0.01, -0.002], [0.02, -0.003], [0.03, -0.004]])
+    state = Result.of({'position': positions, 'in_contact': np.array([False, True, True])})
+    marker = contact_marker(state, 'finger_1', 5, 1)
+    assert (marker.type, marker.action) == (Marker.SPHERE_LIST, Marker.ADD)
+    assert (marker.ns, marker.id, marker.header.frame_id) == (CONTACT_NAMESPACE, 1, 'finger_1')
+    assert [(p.x, p.y, p.z) for p in marker.points] == [(0.02, 0.0, -0.003),
+                                                        (0.03, 0.0, -0.004)]
+    for gone in (None, Result.of({'position': positions, 'in_contact': np.zeros(3, bool)})):
+        deleted = contact_marker(gone, 'finger_1', 5, 1)
+        assert deleted.action == Marker.DELETE and (deleted.ns, deleted.id) == (
+            CONTACT_NAMESPACE, 1)
