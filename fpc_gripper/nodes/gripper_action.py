@@ -49,6 +49,7 @@ class GripperCommandServer:
         self._now = now
         self._log = log
         self._active = None     # (goal handle, CommandGoal) of the running goal
+        self._concluding = 0    # ended goals whose execution has not run yet
         self._last_out = None
         self._last_feedback = None
         self.name = f'{node.get_name()}/gripper_cmd'
@@ -56,6 +57,12 @@ class GripperCommandServer:
             node, GripperCommand, self.name, self._unplanned,
             goal_callback=self._on_goal, handle_accepted_callback=self._on_accepted,
             cancel_callback=self._on_cancel)
+
+    def stopping(self):
+        """Abort a running goal; return a check that its execution ran, or None if none."""
+        if not self.preempt('the controller is stopping'):
+            return None
+        return lambda: not self._concluding
 
     def destroy(self):
         """Abort a running goal and destroy the server."""
@@ -82,9 +89,11 @@ class GripperCommandServer:
             handle.publish_feedback(self._message(self._action.Feedback, goal.feedback(out)))
 
     def preempt(self, why):
-        """End the running goal ABORTED because something else now drives the law."""
-        if self._active is not None:
-            self._finish(self._active[1].abort(self._last_out, why))
+        """End the running goal ABORTED because something else drives the law; True if any."""
+        if self._active is None:
+            return False
+        self._finish(self._active[1].abort(self._last_out, why))
+        return True
 
     # -- the action's side ------------------------------------------------------------------
 
@@ -118,6 +127,7 @@ class GripperCommandServer:
     def _finish(self, result):
         handle, _ = self._active
         self._active = None
+        self._concluding += 1
         handle.execute(functools.partial(self._conclude, result))
 
     def _unplanned(self, handle):
@@ -127,6 +137,7 @@ class GripperCommandServer:
 
     def _conclude(self, result, handle):
         """Execute callback of an ended goal: set its terminal state, return its result."""
+        self._concluding -= 1
         if result.outcome is Outcome.SUCCEEDED:
             handle.succeed()
         elif result.outcome is Outcome.CANCELED and handle.is_cancel_requested:

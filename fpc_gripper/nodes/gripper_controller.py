@@ -287,6 +287,12 @@ class GripperController(Node):
         """Finger names in index order."""
         return self._names
 
+    def stopping(self):
+        """Abort a running GripperCommand goal; return a check that its end ran, or None."""
+        if self._gripper_cmd is None:
+            return None
+        return self._gripper_cmd.stopping()
+
     def destroy_node(self):
         """Abort a running GripperCommand goal, then destroy the node."""
         if getattr(self, '_gripper_cmd', None) is not None:

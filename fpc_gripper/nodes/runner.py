@@ -26,6 +26,10 @@ __all__ = ['EXECUTOR_ENV', 'FORCE_AFTER_S', 'START_ERRORS', 'StopRequest', 'make
 EXECUTOR_ENV = 'FPC_GRIPPER_EXECUTOR'
 #: A stop signal this long after the first one interrupts a callback still running [s].
 FORCE_AFTER_S = 1.0
+#: Longest wait for what the nodes' ``stopping()`` left to the executor [s], and the
+#: spins after it that send what it queued (an aborted goal's result).
+_FLUSH_S = 0.5
+_FLUSH_SPINS = 10
 #: The longest one spin waits: the EventsExecutor's spin_once() without a timeout does
 #: not return on its own wake() in the Jazzy wheel, so a stop is seen within this [s].
 SPIN_TIMEOUT_S = 0.1
@@ -152,6 +156,25 @@ def own_arguments(args, name):
         return None
 
 
+def _flush_stops(nodes, executor):
+    """
+    Let nodes end what clients wait for (a running action goal) while the executor lives.
+
+    A node's ``stopping()`` returns None, or a callable that is True once the executor has
+    run the work it left (the execution of an aborted goal). The executor spins until then,
+    at most `_FLUSH_S`, and a little more to send what that work queued (the result).
+    """
+    waiting = [node.stopping() for node in nodes if hasattr(node, 'stopping')]
+    waiting = [done for done in waiting if done is not None]
+    if not waiting:
+        return
+    deadline = time.monotonic() + _FLUSH_S
+    while not all(done() for done in waiting) and time.monotonic() < deadline:
+        executor.spin_once(timeout_sec=0.01)
+    for _ in range(_FLUSH_SPINS):
+        executor.spin_once(timeout_sec=0.01)
+
+
 def run_node(build, name, args=None, check=None):
     """
     Build a node (or several), spin until SIGINT or SIGTERM, destroy them, shut rclpy down.
@@ -224,6 +247,7 @@ def run_node(build, name, args=None, check=None):
         if waker is not None:
             waker.close()
         if executor is not None:
+            _flush_stops(nodes, executor)
             executor.shutdown()
         for node in reversed(nodes):
             node.destroy_node()

@@ -9,14 +9,16 @@ import sys
 import threading
 import time
 
+from action_msgs.msg import GoalStatus
+from control_msgs.action import GripperCommand
 from helpers import read_with_rosbags
 from nav_msgs.msg import Path
 import pytest
 import rclpy
+from rclpy.action import ActionClient
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import DurabilityPolicy
 from rclpy.qos import QoSProfile
-from std_msgs.msg import Float64
 
 from fpc_gripper.io.mcap_reader import McapFile
 from fpc_gripper.nodes.runner import StopRequest
@@ -27,7 +29,9 @@ CONFIG = ROOT / 'config'
 NODES = {
     'model_node': ('model_node', 'waiting for pressure input', []),
     'regulator_bridge': ('regulator_bridge', 'active:', []),
-    'gripper_controller': ('gripper_controller', 'ready:', []),
+    # A goal that never ends on its own: it must still run when the signals come.
+    'gripper_controller': ('gripper_controller', 'ready:',
+                           ['-p', 'settle_time_s:=60.0', '-p', 'stall_timeout_s:=3600.0']),
     'mcap_recorder': ('mcap_recorder', 'recording', ['-p', 'flush_period_s:=0.2',
                                                      '-p', 'discovery_period_s:=0.1']),
 }
@@ -113,7 +117,7 @@ def _spin_until(executor, condition, timeout):
 @pytest.mark.ros
 @pytest.mark.parametrize('pattern', list(PATTERNS))
 def test_every_node_exits_0_without_a_traceback(probe, tmp_path, pattern):
-    """The four nodes run as one gripper, busy, and all get the same signals at once."""
+    """The four nodes run as one gripper, busy on a goal, and all get the same signals."""
     namespace = f'/sd{list(PATTERNS).index(pattern)}'
     output = tmp_path / 'recording.mcap'
     nodes = [NodeProcess(name, namespace, output) for name in NODES]
@@ -121,25 +125,28 @@ def test_every_node_exits_0_without_a_traceback(probe, tmp_path, pattern):
     subscription = probe.create_subscription(
         Path, f'{namespace}/finger_0/shape', shapes.append,
         QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL))
-    goal = probe.create_publisher(Float64, f'{namespace}/aperture_command', 10)
+    client = ActionClient(probe, GripperCommand, f'{namespace}/gripper_controller/gripper_cmd')
     try:
         deadline = time.monotonic() + STARTUP_S
         for node in nodes:
             assert node.ready.wait(max(deadline - time.monotonic(), 0.0)), \
                 f'{node.name} did not start:\n{node.log()}'
-        # A goal puts the whole loop to work: controller -> bridge -> model -> recorder.
-        # (Sent again each second: graph discovery can run ahead of the endpoint matching
-        # that delivers data, and the same goal twice is one goal.)
-        deadline = time.monotonic() + 60.0
-        while not shapes:
-            assert time.monotonic() < deadline, ''.join(n.log() for n in nodes)
-            goal.publish(Float64(data=0.1))
-            probe.spin_until(lambda: shapes, 1.0)
+        # A GripperCommand goal puts the whole loop to work: controller -> bridge -> model
+        # -> recorder.
+        assert probe.spin_until(client.server_is_ready, 60.0), nodes[2].log()
+        request = GripperCommand.Goal()
+        request.command.position = 0.150
+        sent = client.send_goal_async(request)
+        assert probe.spin_until(sent.done, 60.0) and sent.result().accepted
+        result = sent.result().get_result_async()
+        assert probe.spin_until(lambda: shapes, 60.0), ''.join(n.log() for n in nodes)
         probe.spin_until(lambda: False, 0.3)
         for sig, delay in PATTERNS[pattern]:
             time.sleep(delay)
             for node in nodes:
                 os.kill(node.process.pid, sig)
+        # The stopping controller ends the running goal, and its client hears of it.
+        probe.spin_until(result.done, 30.0)
         codes = {node.name: node.wait(timeout=30.0) for node in nodes}
     finally:
         for node in nodes:
@@ -147,7 +154,9 @@ def test_every_node_exits_0_without_a_traceback(probe, tmp_path, pattern):
                 node.process.kill()
                 node.wait(timeout=10.0)
         probe.destroy_subscription(subscription)
-        probe.destroy_publisher(goal)
+        client.destroy()
+    assert result.done(), nodes[2].log()
+    assert result.result().status == GoalStatus.STATUS_ABORTED, nodes[2].log()
     for node in nodes:
         print(f'{node.name:<20} {pattern:<22} -> exit {codes[node.name]}')
     for node in nodes:
