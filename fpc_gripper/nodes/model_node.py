@@ -187,6 +187,10 @@ def _parameter_table():
          'Prefix of every frame id published or expected (<prefix>palm, <prefix>finger_<i>), '
          'so that two grippers can share a tf tree, e.g. "left/".',
          {'read_only': True}),
+        ('publish_tf', True,
+         'Send tf: the mounts palm -> finger_<i> on /tf_static, and finger_<i> -> '
+         'finger_<i>_tip on /tf with every shape.',
+         {'read_only': True}),
         *input_bound_table(),
     )
 
@@ -399,6 +403,8 @@ class ModelNode(Node):
         publishes tf2_msgs/TFMessage itself, with tf2_ros's QoS (a PyPI install gets
         tf2_msgs from scripts/build_interfaces.sh). Without tf2_msgs there is no tf.
         """
+        if not self.get_parameter('publish_tf').value:
+            return None, 'publish_tf false: no tf'
         try:
             from tf2_msgs.msg import TFMessage
         except ImportError:

@@ -742,3 +742,10 @@ def test_tf_builds_palm_to_finger_to_tip_and_the_tip_is_the_shapes_last_pose(ros
     in_palm = quaternion_rotate([r.x, r.y, r.z, r.w], [t.x, t.y, t.z]) + [
         offset.x, offset.y, offset.z]
     assert_allclose(in_palm, palm_points(1, [direct(120e3).points[-1]])[0], rtol=0, atol=1e-9)
+
+
+@pytest.mark.ros
+def test_publish_tf_false_sends_no_tf(ros):
+    node = ros.add(ModelNode(context=ros.context, namespace='/notf', parameter_overrides=[
+        Parameter('publish_tf', value=False)]))
+    assert not [p for p in node.publishers if p.topic_name in ('/tf', '/tf_static')]

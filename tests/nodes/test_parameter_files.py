@@ -31,7 +31,8 @@ CHANGED = {
     'model_node': {
         'tolerance': 0.0, 'n_segments': 12, 'pressure_model': 'isobaric', 'max_rate_hz': 150.0,
         'pressure_input': 'measured', 'atmospheric_pressure': 100000.0, 'stale_after_s': 2.5,
-        'rigidity_rate_hz': 4.0, 'frame_prefix': 'left/', 'future_limit_s': 0.5,
+        'rigidity_rate_hz': 4.0, 'frame_prefix': 'left/', 'publish_tf': False,
+        'future_limit_s': 0.5,
         'min_absolute_pressure': 2.0e4, 'max_tip_force': 2.5, 'max_frame_id_length': 64,
         'max_payload_bytes': 2048},
     'regulator_bridge': {
