@@ -89,8 +89,7 @@ def side_view(design, ribs='exact', poisson=False):
                                   12))
     xc = 0.5 * (x_breaks[1:] + x_breaks[:-1])
     zc = 0.5 * (z_breaks[1:] + z_breaks[:-1])
-    law = np.where(zc < -design.h3, 0, np.where(zc < design.h2, 1,
-                                                 np.where(zc < design.h1, 2, 3)))
+    law = np.select([zc < -design.h3, zc < design.h2, zc < design.h1], [0, 1, 2], 3)
     cell_law = np.broadcast_to(law, (xc.size, zc.size)).copy()
     open_gas, rib_gas = _gas_widths(design, ribs)
     at_rib = np.zeros(xc.size, dtype=bool)

@@ -1,14 +1,18 @@
-"""Total-Lagrangian plane-strain FE of a layered strip on 9-node quads (scikit-fem), with Newton."""
+"""Total-Lagrangian plane-strain FE of a layered strip on 9-node quads (scikit-fem); Newton."""
 
 from dataclasses import dataclass
 import math
 
 import numpy as np
 from scipy.sparse.linalg import spsolve
-from skfem import (Basis, BilinearForm, ElementQuad2, ElementVector, FacetBasis, LinearForm,
-                   MeshQuad)
 
+from . import require_skfem
 from .material import biot_response, volume_response
+
+_skfem = require_skfem()
+Basis, BilinearForm, LinearForm = _skfem.Basis, _skfem.BilinearForm, _skfem.LinearForm
+ElementQuad2, ElementVector = _skfem.ElementQuad2, _skfem.ElementVector
+FacetBasis, MeshQuad = _skfem.FacetBasis, _skfem.MeshQuad
 
 __all__ = ['Strip', 'StripSolution', 'grid_lines']
 
