@@ -7,7 +7,7 @@ import numpy as np
 from scipy.sparse.linalg import spsolve
 
 from . import require_skfem
-from .material import biot_response, volume_response
+from .material import biot_response, stretch_response, volume_response
 
 _skfem = require_skfem()
 Basis, BilinearForm, LinearForm = _skfem.Basis, _skfem.BilinearForm, _skfem.LinearForm
@@ -99,11 +99,17 @@ class Strip:
     tip_profile : callable, optional
         Weight q(z) [1/m] of the tip traction over the face x = length, int q dz = 1; default
         uniform.
+    gas_model : {'area', 'axial'}
+        The gas volume per unit reference volume: J (a follower pressure on the walls) or
+        the X-fibre stretch (the beam rungs' volume).
 
     """
 
     def __init__(self, x_breaks, z_breaks, cell_law, laws, width, gas_width, element_size,
-                 support='clamp', tip_profile=None):
+                 support='clamp', tip_profile=None, gas_model='area'):
+        if gas_model not in ('area', 'axial'):
+            raise ValueError(f"`gas_model` must be 'area' or 'axial', got {gas_model!r}")
+        self._volume = volume_response if gas_model == 'area' else stretch_response
         self.x_breaks = np.asarray(x_breaks, dtype=float)
         self.z_breaks = np.asarray(z_breaks, dtype=float)
         self.length = float(self.x_breaks[-1])
@@ -193,11 +199,13 @@ class Strip:
         params = self._params.copy()
         params[6] = params[6] * level
         psi, stress, tangent = biot_response(grad, params)
-        jac, cof, second = volume_response(grad)
+        volume, first, second = self._volume(grad)
         gas = level * pressure_work * self._gas
-        density = self._width * psi - gas * jac
-        stress = self._width * stress - gas * cof
-        tangent = self._width * tangent - gas * second[..., None, None]
+        density = self._width * psi - gas * volume
+        stress = self._width * stress - gas * first
+        if second.ndim == 4:
+            second = second[..., None, None]
+        tangent = self._width * tangent - gas * second
         return density, stress, tangent
 
     def load_vector(self, tip_force):

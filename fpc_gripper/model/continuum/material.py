@@ -5,7 +5,7 @@ from dataclasses import dataclass
 import numpy as np
 
 __all__ = ['BiotMaterial', 'linear_material', 'pemc_material', 'biot_response',
-           'volume_response']
+           'volume_response', 'stretch_response']
 
 # (a, b, d1, d2) = T (F11, F12, F21, F22): a = tr F, b = F21 - F12 carry the rotation,
 # d1 = F11 - F22, d2 = F21 + F12 the deviatoric part.
@@ -200,3 +200,30 @@ def volume_response(grad_u):
     cof = np.stack([np.stack([f22, -f21]), np.stack([-f12, f11])])
     eps = np.array([[0.0, 1.0], [-1.0, 0.0]])
     return j, cof, np.einsum('ik,jl->ijkl', eps, eps)
+
+
+def stretch_response(grad_u):
+    """
+    Stretch lambda = |F e_X| of a fibre along X with its first and second derivatives in F.
+
+    The beam rungs' gas volume per unit reference volume, (1 + e) with e the fibre's
+    strain (the section law's (1 + c1) is 1 in plane strain).
+
+    Returns
+    -------
+    stretch : ndarray, shape (...)
+    first : ndarray, shape (2, 2, ...)
+        d lambda / d F (only the X column is non-zero).
+    second : ndarray, shape (2, 2, 2, 2, ...)
+        d^2 lambda / d F_iJ d F_kL.
+
+    """
+    column = np.stack([1.0 + grad_u[0, 0], grad_u[1, 0]])
+    stretch = np.hypot(column[0], column[1])
+    n = column / stretch
+    first = np.zeros((2, 2) + stretch.shape)
+    first[:, 0] = n
+    second = np.zeros((2, 2, 2, 2) + stretch.shape)
+    second[:, 0, :, 0] = (np.eye(2).reshape((2, 2) + (1,) * stretch.ndim)
+                          - np.einsum('i...,k...->ik...', n, n)) / stretch
+    return stretch, first, second

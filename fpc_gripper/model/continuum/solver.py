@@ -42,11 +42,16 @@ class ContinuumSolver:
         The linear laminae's X-Z Poisson coupling (`material.linear_material`). False (the
         default) keeps their thickness in pure bending, as the section law does; True is
         the isotropic plane-strain law, whose thinning moves the unloaded tip by ~3 mm.
+    gas_model : {'area', 'axial'}
+        'area': the gas volume is the gas width times the channel band's deformed area, the
+        exact potential of a follower pressure on its walls. 'axial': the beam rungs'
+        volume, the band's X-fibre stretch, without the channel's growth through the
+        thickness (`fe.Strip`).
 
     """
 
     def __init__(self, design, ribs='exact', element_size=1e-3, pressure_model=None,
-                 poisson=False):
+                 poisson=False, gas_model='area'):
         size = real_number('element_size', element_size, '[m]')
         if not 0.0 < size <= 5e-3:
             raise ArgumentError('element_size', f'must be in (0, 0.005] [m], got {size}')
@@ -58,10 +63,11 @@ class ContinuumSolver:
         self.ribs = ribs
         self.element_size = size
         self.strip = Strip(self.view.x_breaks, self.view.z_breaks, self.view.cell_law,
-                           self.view.laws, self.view.width, self.view.gas_width, size)
+                           self.view.laws, self.view.width, self.view.gas_width, size,
+                           gas_model=gas_model)
         self._x, self._mid = self.strip.line_dofs(0.0)
         self._tip = self.strip.vertex_dofs(design.free_length, 0.0)
-        self.model = f'continuum h={size * 1e3:.3g} mm, ribs {ribs}'
+        self.model = f'continuum h={size * 1e3:.3g} mm, ribs {ribs}, gas {gas_model}'
 
     def solve(self, pressure=0.0, tip_force=(0.0, 0.0)):
         """
