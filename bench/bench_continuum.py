@@ -3,7 +3,7 @@ The continuum rung's reference table, its mesh convergence, and the beam rungs a
 
 Run by hand from the repository root (scikit-fem installed):
 
-    .venv/bin/python bench/bench_continuum.py [--part table|convergence|all] [--quick]
+    .venv/bin/python bench/bench_continuum.py [--part table|convergence|axial|all] [--quick]
 
 Writes bench/results/continuum.json (each part its own key; a part run alone keeps the
 other's stored results):
@@ -16,6 +16,8 @@ other's stored results):
 - convergence: prestrain 0.25, unloaded (ribs averaged and exact) and 200 kPa (exact), at
   h = 2, 1, 0.5 mm: tip and its distance to the finest mesh; and the Poisson-coupled law
   (poisson=True) at h = 1 mm for the idealisation it stands for.
+- axial: the unloaded pressure scenes of the table again with gas_model='axial' (the beam
+  rungs' gas volume, no growth of the channel through the thickness).
 """
 
 import argparse
@@ -73,6 +75,25 @@ def _fe_row(solver, pressure, load):
                'interior_curvature': _interior_curvature(r), 'fit_rmsd_mm': r.fit_rmsd * 1e3,
                'load_steps': r.load_steps, 'iterations': r.iterations, 'dofs': r.n_dofs,
                'seconds': r.seconds}
+
+
+def axial(quick):
+    """Return the unloaded pressure rows with the beam rungs' gas volume."""
+    rows = []
+    for eps0 in PRESTRAINS:
+        design = ActuatorDesign.paper(prestrain=eps0)
+        fe = ContinuumSolver(design, ribs='exact', element_size=ELEMENT_SIZE, gas_model='axial')
+        rod = RodSolver(design, ribs='exact')
+        for pressure in ((0.0, 400e3) if quick else PRESSURES[1:]):
+            r, row = _fe_row(fe, pressure, (0.0, 0.0))
+            beam = rod.solve(pressure=pressure)
+            row.update(prestrain=eps0, pressure_kpa=pressure / 1e3,
+                       rod_error_mm=float(np.hypot(*(beam.tip - r.tip)) * 1e3))
+            print(f'axial gas: eps0 {eps0:.2f} P {pressure / 1e3:5.0f} kPa: FE tip '
+                  f"({row['tip_mm'][0]:7.3f}, {row['tip_mm'][1]:7.3f}) mm, rod "
+                  f"{row['rod_error_mm']:.3f} mm, {row['message']}", flush=True)
+            rows.append(row)
+    return rows
 
 
 def _rungs(design):
@@ -140,7 +161,8 @@ def convergence():
 def main(argv=None):
     """Run the parts asked for and merge them into bench/results/continuum.json."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[1])
-    parser.add_argument('--part', choices=('table', 'convergence', 'all'), default='all')
+    parser.add_argument('--part', choices=('table', 'convergence', 'axial', 'all'),
+                        default='all')
     parser.add_argument('--quick', action='store_true', help='a few scenes, not stored')
     args = parser.parse_args(argv)
     stored = json.loads(RESULTS.read_text()) if RESULTS.exists() else {}
@@ -154,6 +176,9 @@ def main(argv=None):
                            'rows': table(args.quick)}
     if args.part in ('convergence', 'all') and not args.quick:
         stored['convergence'] = {'meta': meta, 'cases': convergence()}
+    if args.part in ('axial', 'all'):
+        stored['axial'] = {'meta': meta, 'element_size_mm': ELEMENT_SIZE * 1e3,
+                           'rows': axial(args.quick)}
     if not args.quick:
         RESULTS.write_text(json.dumps(stored, indent=1) + '\n')
 
