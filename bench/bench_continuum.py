@@ -3,7 +3,7 @@ The continuum rung's reference table, its mesh convergence, and the beam rungs a
 
 Run by hand from the repository root (scikit-fem installed):
 
-    .venv/bin/python bench/bench_continuum.py [--part table|convergence|axial|all] [--quick]
+    .venv/bin/python bench/bench_continuum.py [--part table|convergence|variants|all] [--quick]
 
 Writes bench/results/continuum.json (each part its own key; a part run alone keeps the
 other's stored results):
@@ -16,8 +16,9 @@ other's stored results):
 - convergence: prestrain 0.25, unloaded (ribs averaged and exact) and 200 kPa (exact), at
   h = 2, 1, 0.5 mm: tip and its distance to the finest mesh; and the Poisson-coupled law
   (poisson=True) at h = 1 mm for the idealisation it stands for.
-- axial: the unloaded pressure scenes of the table again with gas_model='axial' (the beam
-  rungs' gas volume, no growth of the channel through the thickness).
+- variants: the unloaded pressure scenes of the table again with gas_model='axial' (the
+  beam rungs' gas volume, no growth of the channel through the thickness) and with
+  poisson=True (a nearly incompressible fluidic layer), against the rod.
 """
 
 import argparse
@@ -73,26 +74,29 @@ def _fe_row(solver, pressure, load):
     return r, {'success': bool(r.success), 'message': r.message,
                'tip_mm': (r.tip * 1e3).tolist(), 'curvature': r.curvature,
                'interior_curvature': _interior_curvature(r), 'fit_rmsd_mm': r.fit_rmsd * 1e3,
-               'load_steps': r.load_steps, 'iterations': r.iterations, 'dofs': r.n_dofs,
-               'seconds': r.seconds}
+               'load_steps': int(r.load_steps), 'iterations': int(r.iterations),
+               'dofs': int(r.n_dofs), 'seconds': float(r.seconds)}
 
 
-def axial(quick):
-    """Return the unloaded pressure rows with the beam rungs' gas volume."""
+def variants(quick):
+    """Return the pressure scenes with the two other idealisations of the channel band."""
     rows = []
     for eps0 in PRESTRAINS:
         design = ActuatorDesign.paper(prestrain=eps0)
-        fe = ContinuumSolver(design, ribs='exact', element_size=ELEMENT_SIZE, gas_model='axial')
         rod = RodSolver(design, ribs='exact')
-        for pressure in ((0.0, 400e3) if quick else PRESSURES[1:]):
-            r, row = _fe_row(fe, pressure, (0.0, 0.0))
-            beam = rod.solve(pressure=pressure)
-            row.update(prestrain=eps0, pressure_kpa=pressure / 1e3,
-                       rod_error_mm=float(np.hypot(*(beam.tip - r.tip)) * 1e3))
-            print(f'axial gas: eps0 {eps0:.2f} P {pressure / 1e3:5.0f} kPa: FE tip '
-                  f"({row['tip_mm'][0]:7.3f}, {row['tip_mm'][1]:7.3f}) mm, rod "
-                  f"{row['rod_error_mm']:.3f} mm, {row['message']}", flush=True)
-            rows.append(row)
+        for name, kwargs in (('gas axial', {'gas_model': 'axial'}),
+                             ('poisson', {'poisson': True})):
+            fe = ContinuumSolver(design, ribs='exact', element_size=ELEMENT_SIZE, **kwargs)
+            for pressure in ((400e3,) if quick else PRESSURES[1:]):
+                r, row = _fe_row(fe, pressure, (0.0, 0.0))
+                beam = rod.solve(pressure=pressure)
+                row.update(variant=name, prestrain=eps0, pressure_kpa=pressure / 1e3,
+                           rod_tip_mm=(beam.tip * 1e3).tolist(),
+                           rod_error_mm=float(np.hypot(*(beam.tip - r.tip)) * 1e3))
+                print(f'{name}: eps0 {eps0:.2f} P {pressure / 1e3:5.0f} kPa: FE tip '
+                      f"({row['tip_mm'][0]:7.3f}, {row['tip_mm'][1]:7.3f}) mm, rod "
+                      f"{row['rod_error_mm']:.3f} mm, {row['message']}", flush=True)
+                rows.append(row)
     return rows
 
 
@@ -161,25 +165,28 @@ def convergence():
 def main(argv=None):
     """Run the parts asked for and merge them into bench/results/continuum.json."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[1])
-    parser.add_argument('--part', choices=('table', 'convergence', 'axial', 'all'),
+    parser.add_argument('--part', choices=('table', 'convergence', 'variants', 'all'),
                         default='all')
     parser.add_argument('--quick', action='store_true', help='a few scenes, not stored')
     args = parser.parse_args(argv)
-    stored = json.loads(RESULTS.read_text()) if RESULTS.exists() else {}
+    parts = {}
     commit = subprocess.run(['git', 'rev-parse', '--short', 'HEAD'], capture_output=True,
                             text=True, cwd=_HERE).stdout.strip()
     meta = {'commit': commit, 'date': time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime()),
             'machine': machine()}
     if args.part in ('table', 'all'):
-        stored['table'] = {'meta': meta, 'element_size_mm': ELEMENT_SIZE * 1e3,
-                           'ribs': 'exact', 'pressure_model': 'design (k_p = 2.5)',
-                           'rows': table(args.quick)}
+        parts['table'] = {'meta': meta, 'element_size_mm': ELEMENT_SIZE * 1e3,
+                          'ribs': 'exact', 'pressure_model': 'design (k_p = 2.5)',
+                          'rows': table(args.quick)}
     if args.part in ('convergence', 'all') and not args.quick:
-        stored['convergence'] = {'meta': meta, 'cases': convergence()}
-    if args.part in ('axial', 'all'):
-        stored['axial'] = {'meta': meta, 'element_size_mm': ELEMENT_SIZE * 1e3,
-                           'rows': axial(args.quick)}
+        parts['convergence'] = {'meta': meta, 'cases': convergence()}
+    if args.part in ('variants', 'all'):
+        parts['variants'] = {'meta': meta, 'element_size_mm': ELEMENT_SIZE * 1e3,
+                             'rows': variants(args.quick)}
     if not args.quick:
+        # Read just before writing: parts run in parallel keep each other's results.
+        stored = json.loads(RESULTS.read_text()) if RESULTS.exists() else {}
+        stored.update(parts)
         RESULTS.write_text(json.dumps(stored, indent=1) + '\n')
 
 
