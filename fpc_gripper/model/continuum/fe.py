@@ -194,7 +194,7 @@ class Strip:
 
     # -- energy and derivatives -----------------------------------------------------------
     def _fields(self, u, level, pressure_work):
-        """psi w - t k_p P g J at the quadrature points, and its stress and tangent."""
+        """Return w psi - t k_p P g V at the quadrature points, with its stress and tangent."""
         grad = self.basis.interpolate(u).grad
         params = self._params.copy()
         params[6] = params[6] * level

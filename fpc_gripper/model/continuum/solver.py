@@ -1,7 +1,5 @@
 """`ContinuumSolver`: a design's side view solved by the FE, returned as a finger `Result`."""
 
-import time
-
 import numpy as np
 
 from .body import side_view
@@ -85,8 +83,7 @@ class ContinuumSolver:
         Result
             `FINGER_FIELDS` (tip and points at the midplane; nodes at the midplane's
             element-column edges; strains, coefficients, beta and theta None), plus
-            `n_dofs`, `load_steps` and `seconds` (the wall time of this solve, for the
-            bench's cost column; nothing reads it back).
+            `n_dofs` and `load_steps`.
 
         """
         pressure = real_number('pressure', pressure, '[Pa]')
@@ -94,9 +91,7 @@ class ContinuumSolver:
             raise ArgumentError('pressure', f'must be in [0, {self.design.max_pressure:g}] '
                                             f'[Pa], got {pressure}')
         tip_force = real_pair('tip_force', tip_force, '[N]')
-        start = time.perf_counter()
         out = self.strip.solve(self.pressure_work_factor * pressure, tip_force)
-        seconds = time.perf_counter() - start
         u = out.u
         points = np.stack([self._x + u[self._mid[0]], u[self._mid[1]]], axis=1)
         tip = np.array([self.design.free_length + u[self._tip[0]], u[self._tip[1]]])
@@ -119,5 +114,5 @@ class ContinuumSolver:
                 u, out.fraction, self.pressure_work_factor * pressure, tip_force),
             points=points, curvature=fit.curvature, fit_rmsd=fit.rmsd,
             position_at=position_at, fraction=out.fraction, n_dofs=self.strip.n_dofs,
-            load_steps=out.steps, seconds=seconds)
+            load_steps=out.steps)
         return Result.of(fields)
