@@ -181,3 +181,24 @@ def test_cantilever_tip_deflection_is_euler_bernoulli_plus_shear():
     expected = bending + 1.5 * force * length / (shear * depth)
     assert expected > 1.02 * bending    # the shear term matters at L/h = 5
     assert_allclose(deflection, expected, rtol=1e-3)
+
+
+@pytest.mark.parametrize('gas_model', ['axial', 'area'])
+def test_the_gas_potential_is_minus_pressure_times_the_deformed_gas_volume(gas_model):
+    # A gas band between two solid layers. Under a uniform stretch eps of everything and a
+    # uniform through-thickness strain e of the band alone, the gas volume is g h L (1 + eps)
+    # by the beam rungs' measure ('axial') and g h L (1 + eps)(1 + e) by area ('area').
+    solid = linear_material(Material(263e6, 263e6, 0.0), poisson=False)
+    length, h_band, t_layer, gas_width, p_work = 10e-3, 1e-3, 0.5e-3, 0.02, 2e5
+    strip = Strip([0.0, length], [-h_band / 2 - t_layer, -h_band / 2, 0.0, h_band / 2,
+                                  h_band / 2 + t_layer], np.zeros((1, 4), int), [solid],
+                  np.full((1, 4), 0.01), np.array([[0.0, gas_width, gas_width, 0.0]]), 1e-3,
+                  gas_model=gas_model)
+    eps, e = 0.03, -0.2
+    x, z = strip.basis.doflocs
+    u = np.where(np.arange(strip.n_dofs) % 2 == 0, eps * x,
+                 e * np.clip(z, -h_band / 2, h_band / 2))
+    assert set(np.unique(strip.basis.nodal_dofs[0] % 2)) == {0}    # u_x, u_z interleaved
+    gas = strip.energy(u, pressure_work=p_work) - strip.energy(u)
+    volume = gas_width * h_band * length * (1 + eps) * ((1 + e) if gas_model == 'area' else 1)
+    assert_allclose(gas, -p_work * volume, rtol=1e-12)
