@@ -50,7 +50,9 @@ setup(
     ],
     install_requires=['setuptools', 'numpy', 'scipy', 'numba', 'PyYAML', 'pandas', 'tqdm'],
     # fpc-design: sweeps on a Dask cluster (--scheduler), parquet tables (--format parquet).
-    extras_require={'dask': ['dask', 'distributed'], 'parquet': ['pyarrow']},
+    # continuum: the offline finite-element rung (fpc_gripper/model/continuum/).
+    extras_require={'dask': ['dask', 'distributed'], 'parquet': ['pyarrow'],
+                    'continuum': ['scikit-fem']},
     zip_safe=True,
     maintainer='fpc_gripper developers',
     maintainer_email='dev@fpc-gripper.invalid',

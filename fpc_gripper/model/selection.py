@@ -1,6 +1,7 @@
 """Model selection on the ladder (arc, CCM-N, rod) and automatic segment refinement."""
 
 import bisect
+import dataclasses
 from dataclasses import dataclass
 import functools
 import json
@@ -16,6 +17,7 @@ from .discretisations.arc import ArcSolver
 from .discretisations.ccm import CCMSolver, SolverStatus
 from .discretisations.pcc import PCCSolver
 from .discretisations.rod import RodSolver
+from .reference import CONTINUUM_FLOOR, rod_tolerance
 from .section.law import station_layout
 from .section.segments import uniform_edges
 from .validation import check_load, check_pressure_model, real_number
@@ -361,7 +363,7 @@ def scene_turning(scene, error_model=None):
     return feature.turning(scene.pressure, scene.tip_force)
 
 
-def choose_model(scene, tolerance, error_model=None):
+def choose_model(scene, tolerance, error_model=None, reference='rod'):
     """
     Pick the cheapest rung and segment count whose tip error meets a tolerance.
 
@@ -383,10 +385,15 @@ def choose_model(scene, tolerance, error_model=None):
         Tip-position tolerance [m], > 0.
     error_model : dict, optional
         Default: `load_error_model()`.
+    reference : {'rod', 'continuum'}
+        What the tolerance is measured against (`reference.rod_tolerance`): the rod (the
+        error model's own reference), or the 2-D continuum, for unpressurised scenes and
+        tolerances above the beam floor `reference.CONTINUUM_FLOOR` (else ValueError).
 
     Returns
     -------
     ModelChoice
+        Its `predicted_error` and `reason` against `reference`.
 
     References
     ----------
@@ -398,9 +405,16 @@ def choose_model(scene, tolerance, error_model=None):
     tolerance = real_number('tolerance', tolerance, '[m]')
     if tolerance <= 0.0:
         raise ValueError(f'`tolerance` must be > 0 [m], got {tolerance}')
+    against_rod = rod_tolerance(tolerance, reference, scene.pressure)
     model = load_error_model() if error_model is None else error_model
-    return _choose(model, _scene_bin(model, scene.design.prestrain, scene.pressure, scene.load,
-                                     scene_turning(scene, model)), tolerance)
+    choice = _choose(model, _scene_bin(model, scene.design.prestrain, scene.pressure,
+                                       scene.load, scene_turning(scene, model)), against_rod)
+    if reference == 'rod':
+        return choice
+    return dataclasses.replace(
+        choice, predicted_error=choice.predicted_error + CONTINUUM_FLOOR,
+        reason=f'against the continuum (beam floor {CONTINUUM_FLOOR:g} m + error against '
+               f'the rod): {choice.reason}')
 
 
 def _scene_bin(model, prestrain, pressure, load, turning):
