@@ -24,6 +24,8 @@ STATUS_SMALL_ROTATION = 'small_rotation'
 #: `status` of a row whose equilibrium is fine but whose K_x or K_z was not found.
 STATUS_RIGIDITY = 'rigidity_failed'
 _SOLVER_STATUS = {int(s): s.name.lower() for s in SolverStatus}
+#: Scenes of a local run above which it is chunked for progress lines off a terminal.
+_SCENES_FOR_PROGRESS = 4000
 #: Tasks of a Dask run, or steps of a progress bar, when the caller does not say.
 _CHUNKS = 16
 
@@ -211,7 +213,11 @@ def sweep(vary=None, pressures=None, design=None, model='default', rigidity=Fals
     if chunk_designs is None:
         # One batch is fastest (designs of one discretisation and options share compiled
         # loops); tasks for Dask and for a progress bar. No chunking changes a row.
-        whole = scheduler is None and not shows_progress(progress)
+        # Off a terminal progress is a line every few seconds: chunk the runs that may
+        # take that long.
+        scenes = len(points) * pressures.size
+        whole = scheduler is None and (progress is False or (
+            not shows_progress(progress) and scenes < _SCENES_FOR_PROGRESS))
         size = len(points) if whole else max(1, math.ceil(len(points) / _CHUNKS))
     else:
         size = int(chunk_designs)

@@ -134,9 +134,9 @@ REASONS = {'truncated': 'truncated', 'corrupt': 'damaged', 'not_mcap': 'not an M
 def _commands(bad, out):
     return {
         'info': ['info', bad],
-        'plot': ['plot', bad, out],
-        'export-csv': ['export-csv', bad, out],
-        # --force: even allowed to replace it, a failed replay leaves the old output.
+        # --force: even allowed to replace them, a failed run leaves the old outputs.
+        'plot': ['plot', bad, out, '--force'],
+        'export-csv': ['export-csv', bad, out, '--force'],
         'replay-model': ['replay-model', bad, out / 'replayed.mcap', '--quiet', '--force'],
     }
 
@@ -155,7 +155,7 @@ def test_bad_input_fails_cleanly(capsys, recording, tmp_path, kind, command):
     (out / 'curvature.png').write_bytes(b'previous plot')
     before = sorted(p.name for p in tmp_path.rglob('*'))
     code, _, err = run(capsys, *_commands(bad, out)[command])
-    assert code == 1
+    assert code == 2
     assert f'fpc-mcap {command}: error:' in err and 'Traceback' not in err
     assert REASONS[kind] in err
     assert sorted(p.name for p in tmp_path.rglob('*')) == before   # no temp files left
@@ -180,7 +180,7 @@ def test_unknown_topics_and_bad_options_fail_cleanly(capsys, recording, tmp_path
     out = tmp_path / 'out'
     argv = [a.format(rec=recording, out=out, missing=tmp_path / 'missing.yaml') for a in argv]
     code, _, err = run(capsys, *argv)
-    assert code == 1 and 'error:' in err
+    assert code == 2 and 'error:' in err
     assert not out.exists()
 
 
@@ -212,7 +212,7 @@ def test_recover_skips_a_damaged_chunk(capsys, recording, tmp_path):
 def test_recover_rejects_a_non_mcap_file(capsys, recording, tmp_path):
     bad = _not_mcap(recording, tmp_path / 'junk.mcap')
     code, _, err = run(capsys, 'recover', bad, tmp_path / 'out.mcap')
-    assert code == 1 and 'not an MCAP file' in err
+    assert code == 2 and 'not an MCAP file' in err
     assert not (tmp_path / 'out.mcap').exists()
 
 
@@ -288,7 +288,7 @@ def test_recover_refuses_an_existing_output_unless_forced(capsys, recording, tmp
     out = tmp_path / 'fixed.mcap'
     out.write_bytes(b'precious')
     code, _, err = run(capsys, 'recover', bad, out)
-    assert code == 1 and 'exists' in err and '--force' in err
+    assert code == 2 and 'exists' in err and '--force' in err
     assert out.read_bytes() == b'precious'
     assert sorted(p.name for p in tmp_path.iterdir()) == ['cut.mcap', 'fixed.mcap']
     code, _, err = run(capsys, 'recover', bad, out, '--force')
