@@ -11,13 +11,13 @@ __all__ = ['build_parser', 'main']
 
 _EPILOG = f"""\
 examples:
-  fpc-design sweep --vary prestrain=0.15,0.25,0.40 --vary Cy=22e-3:30e-3/5 --out out/sweep
-  fpc-design sweep --vary prestrain=0.15:0.40/6 --pressure 0:400e3:5e3 --rigidity \\
+  fpc-design sweep --vary prestrain=0.15,0.25,0.40 --vary Cy=22e-3:30e-3/3 --out out/sweep
+  fpc-design sweep --vary prestrain=0.15:0.40/6 --pressure 0:400e3:20e3 --rigidity \\
       --format parquet --out out/sweep2
   fpc-design sweep --figure 7 --out out/figures
   fpc-design optimize --closed-aperture 0.010 --open-aperture 0.09 \\
       --pressure-budget 250e3 --tip-force 0.05 --at-aperture 0.03 --max-strain 0.6 \\
-      --maxiter 6 --out out/design
+      --maxiter 4 --out out/design
 
 {RANGE_HELP}
 Dask (--scheduler local:N or tcp://host:port) is optional: pip install 'fpc_gripper[dask]'.

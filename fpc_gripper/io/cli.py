@@ -497,12 +497,13 @@ def _model_settings(args):
 _IN_HELP = 'MCAP file, or rosbag2 bag directory (metadata.yaml and split .mcap files)'
 _FORCE_HELP = 'replace the outputs of an earlier run'
 _EXAMPLES = """\
-examples (run.mcap: a recording of mcap_recorder or `ros2 bag record -s mcap`):
-  fpc-mcap info run.mcap
-  fpc-mcap plot run.mcap plots/ --times 0,1.5,3
-  fpc-mcap export-csv run.mcap csv/
-  fpc-mcap replay-model run.mcap modelled.mcap
-  fpc-mcap recover crashed.mcap fixed.mcap"""
+examples, on the recordings in examples/recording/ (any recording of mcap_recorder or
+`ros2 bag record -s mcap` alike):
+  fpc-mcap info examples/recording/run.mcap
+  fpc-mcap plot examples/recording/run.mcap plots/ --times 0,1.5,3
+  fpc-mcap export-csv examples/recording/run.mcap csv/
+  fpc-mcap replay-model examples/recording/run.mcap modelled.mcap
+  fpc-mcap recover examples/recording/crashed.mcap fixed.mcap"""
 
 
 def build_parser():

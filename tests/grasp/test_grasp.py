@@ -161,3 +161,14 @@ def test_cli_bad_input_exits_2_with_one_line(tmp_path, capsys, args, word):
     assert err.startswith('fpc-grasp: error:') and word in err
     assert len(err.strip().splitlines()) == 1
     assert not (tmp_path / 'x').exists()
+
+
+def test_cli_a_sweep_with_no_usable_row_exits_1_and_says_why(tmp_path, capsys):
+    out = tmp_path / 'g'
+    code = main(['--object', 'cylinder', '--diameter', '5', '--mu', '0.5', '--pressure', '0',
+                 '--out', str(out)])
+    captured = capsys.readouterr()
+    assert code == 1
+    lines = captured.err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith('fpc-grasp: failed: no grasp pressure')
+    assert (out / 'FAILED.txt').is_file() and (out / 'grasp.csv').is_file()
