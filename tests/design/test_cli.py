@@ -7,7 +7,8 @@ from fpc_gripper.design import cli
 from fpc_gripper.model import ActuatorDesign
 
 COLUMNS = ['design_id', 'prestrain', 'Cy', 'pressure_pa', 'curvature_per_m', 'tip_x_m',
-           'tip_z_m', 'kx_nm2', 'kz_nm2', 'success', 'status', 'model', 'message']
+           'tip_z_m', 'kx_nm2', 'kz_nm2', 'kx_direct_n_per_m', 'kz_direct_n_per_m', 'success',
+           'status', 'model', 'message']
 
 
 def _run(capsys, *argv):
