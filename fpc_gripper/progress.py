@@ -1,6 +1,7 @@
 """Progress of a long job on stderr: a bar on a terminal, a line every few seconds otherwise."""
 
 import sys
+import threading
 import time
 
 __all__ = ['Progress', 'DELAY_S', 'LINE_PERIOD_S']
@@ -17,7 +18,8 @@ class Progress:
 
     On a terminal this is a tqdm bar (cleared at the end); otherwise (a pipe, a log
     file) one line ``label: done/total unit (p %), t s`` every `period` seconds and one
-    at the end, so that a slow job is never silent. ``show=False`` shows nothing.
+    at the end, so that a slow job is never silent: a heartbeat thread prints the line
+    even while one long unit runs (`heartbeat`). ``show=False`` shows nothing.
     Use as a context manager; `update` adds done units, and it is a callable
     ``progress(done, total)`` for cores that report absolute counts.
 
@@ -36,11 +38,13 @@ class Progress:
         Seconds between lines when not on a terminal.
     clock : callable
         Monotonic seconds (injectable for tests).
+    heartbeat : bool
+        Off a terminal, also print from a thread when no unit ended for a period.
 
     """
 
     def __init__(self, total, unit='item', label='', show=None, stream=None,
-                 period=LINE_PERIOD_S, clock=time.monotonic):
+                 period=LINE_PERIOD_S, clock=time.monotonic, heartbeat=True):
         self.total = int(total)
         self.unit = unit
         self.label = label
@@ -51,6 +55,9 @@ class Progress:
         self._bar = None
         self._lines = False
         self._printed = False
+        self._lock = threading.Lock()
+        self._stop = threading.Event()
+        self._thread = None
         self._start = clock()
         self._next = self._start + DELAY_S
         if show is False:
@@ -62,6 +69,20 @@ class Progress:
                              file=self.stream, desc=label or None)
         else:
             self._lines = True
+            if heartbeat:
+                self._thread = threading.Thread(target=self._beat, daemon=True,
+                                                name='progress-heartbeat')
+                self._thread.start()
+
+    def _beat(self):
+        """Print the line when a period passed without one (a long unit), until closed."""
+        wait = DELAY_S
+        while not self._stop.wait(wait):
+            with self._lock:
+                if self._lines and self.clock() >= self._next:
+                    self._line()
+                    self._next = self.clock() + self.period
+                wait = max(0.05, self._next - self.clock())
 
     def __enter__(self):
         """Return the counter."""
@@ -82,12 +103,13 @@ class Progress:
 
     def update(self, count=1):
         """Add `count` done units."""
-        self.done += int(count)
-        if self._bar is not None:
-            self._bar.update(count)
-        elif self._lines and self.clock() >= self._next:
-            self._line()
-            self._next = self.clock() + self.period
+        with self._lock:
+            self.done += int(count)
+            if self._bar is not None:
+                self._bar.update(count)
+            elif self._lines and self.clock() >= self._next:
+                self._line()
+                self._next = self.clock() + self.period
 
     def _line(self):
         percent = 100.0 * self.done / self.total if self.total else 100.0
@@ -98,6 +120,10 @@ class Progress:
 
     def close(self):
         """End the display: clear the bar, or a last line after earlier ones."""
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join()
+            self._thread = None
         if self._bar is not None:
             self._bar.close()
             self._bar = None

@@ -131,3 +131,16 @@ def test_a_short_job_or_no_progress_prints_nothing():
                 clock.now += step
                 progress(k + 1, 10)
         assert stream.getvalue() == ''
+
+
+def test_a_long_unit_off_a_terminal_still_prints_lines():
+    import time
+    stream, clock = io.StringIO(), _Clock()
+    with Progress(1, 'figure', 'tool', stream=stream, period=5.0, clock=clock) as progress:
+        clock.now += 1.5            # one unit still running after 1.5 s (on its clock)
+        deadline = time.monotonic() + 30.0
+        while not stream.getvalue() and time.monotonic() < deadline:
+            time.sleep(0.05)        # the heartbeat thread wakes within a second
+        assert stream.getvalue().startswith('tool: 0/1 figures (0 %), 2 s')
+        progress.update()
+    assert stream.getvalue().splitlines()[-1].startswith('tool: 1/1 figures (100 %)')

@@ -167,10 +167,13 @@ def _prepare_sweep(args):
 
 
 def _figure(args, design, out):
+    from fpc_gripper.progress import Progress
     from .figures import figure
     start = time.perf_counter()
-    with out:
-        frame = figure(args.figure, out.tmp, design, args.scheduler, args.progress)
+    # One unit: off a terminal its heartbeat is the line every few seconds.
+    with out, Progress(1, 'figure', 'fpc-design sweep', show=args.progress) as progress:
+        frame = figure(args.figure, out.tmp, design, args.scheduler, False)
+        progress.update()
         solved = int(frame['success'].sum())
         out.commit(failed=None if solved else 'no row of the figure was solved')
     print(f'figure {args.figure}: {len(frame)} rows ({solved} solved) in '
