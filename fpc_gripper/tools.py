@@ -89,6 +89,17 @@ def add_version(parser):
     return parser
 
 
+def _one_line_errors(parser):
+    """Make argparse's usage errors one line (no usage dump), here and in subcommands."""
+    def error(message, parser=parser):
+        parser.exit(EXIT_INPUT, f'{parser.prog}: error: {message} (see --help)\n')
+    parser.error = error
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for sub in action.choices.values():
+                _one_line_errors(sub)
+
+
 def _flags(parser):
     """Map every option's destination to its long flag, over the subcommands too."""
     out = {}
@@ -133,6 +144,7 @@ def run(parser, prepare, argv=None, input_errors=()):
     """
     if not any(isinstance(a, _Version) for a in parser._actions):
         add_version(parser)
+    _one_line_errors(parser)
     args = parser.parse_args(argv)
     prog = parser.prog + (f' {args.command}' if getattr(args, 'command', None) else '')
     flags = _flags(parser)

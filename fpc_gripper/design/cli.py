@@ -162,6 +162,10 @@ def _prepare_sweep(args):
     if pressures.min() < 0.0:
         raise ValueError(f'`pressure` must be >= 0 (gauge) [Pa], got {args.pressure!r}')
     pressures = batch.check_pressures(pressures)
+    if not (0.0 < args.displacement < float('inf')):
+        raise ValueError(f'`displacement` must be finite and > 0 [m], got {args.displacement}')
+    if args.chunk is not None and args.chunk < 1:
+        raise ValueError(f'`chunk` must be >= 1, got {args.chunk}')
     settings = _settings(args)
     return lambda: _sweep(args, design, vary, pressures, settings, out)
 
@@ -219,7 +223,7 @@ def _sweep(args, design, vary, pressures, settings, out):
 def _prepare_optimize(args):
     """Check the targets, the search and --out; return the search's job."""
     from .grid import base_design, parse_values
-    from .inverse import check_search, palm_radius, Targets
+    from .inverse import check_search, palm_radius, PARAMETERS, Targets
     out = OutputDir(args.out, args.force).check()
     targets = Targets(closed_aperture=args.closed_aperture, open_aperture=args.open_aperture,
                       pressure_budget=args.pressure_budget, kx=args.kx,
@@ -233,6 +237,10 @@ def _prepare_optimize(args):
             raise ValueError(f'`bounds` must be FIELD=LO:HI, got {text!r}')
         bounds[field.strip()] = tuple(interval)
     parameters = [f.strip() for f in args.vary.split(',') if f.strip()]
+    if not parameters or len(set(parameters)) != len(parameters) \
+            or not set(parameters) <= set(PARAMETERS):
+        raise ValueError(f'`vary` must be distinct names from {", ".join(PARAMETERS)}, got '
+                         f'{args.vary!r}')
     design = base_design(args.design)
     check_search(targets, parameters, design, bounds)
     palm_radius(args.gripper)

@@ -125,6 +125,9 @@ def _prepare(args):
     """Check every input and --out; return the job (the sweep and its files)."""
     out = OutputDir(args.out, args.force).check()
     pressures = pressure_range(args.pressure, '`pressure`')
+    if not (0.0 <= args.height < float('inf')):
+        raise ValueError(f'`height` must be >= 0 [m] (the object rests on or above the '
+                         f'palm), got {args.height}')
     obj = make_object(args.object, args.diameter, args.height)
     config = load_gripper_config(args.gripper_config)
     settings = GraspSettings(open_pressure=args.open_pressure, pull_step=args.pull_step,

@@ -2,6 +2,7 @@
 
 import csv
 import math
+import re
 
 import numpy as np
 import pytest
@@ -169,6 +170,8 @@ def test_cli_a_sweep_with_no_usable_row_exits_1_and_says_why(tmp_path, capsys):
                  '--out', str(out)])
     captured = capsys.readouterr()
     assert code == 1
-    lines = captured.err.strip().splitlines()
+    # Progress lines may come first on a slow machine; the failure is one line.
+    lines = [line for line in captured.err.strip().splitlines()
+             if not re.match(r'fpc-grasp: \d+/\d+ steps', line)]
     assert len(lines) == 1 and lines[0].startswith('fpc-grasp: failed: no grasp pressure')
     assert (out / 'FAILED.txt').is_file() and (out / 'grasp.csv').is_file()
