@@ -39,7 +39,7 @@ class Progress:
     clock : callable
         Monotonic seconds (injectable for tests).
     heartbeat : bool
-        Off a terminal, also print from a thread when no unit ended for a period.
+        Also show progress from a thread while one long unit runs.
 
     """
 
@@ -69,16 +69,20 @@ class Progress:
                              file=self.stream, desc=label or None)
         else:
             self._lines = True
-            if heartbeat:
-                self._thread = threading.Thread(target=self._beat, daemon=True,
-                                                name='progress-heartbeat')
-                self._thread.start()
+        if heartbeat:
+            self._thread = threading.Thread(target=self._beat, daemon=True,
+                                            name='progress-heartbeat')
+            self._thread.start()
 
     def _beat(self):
-        """Print the line when a period passed without one (a long unit), until closed."""
+        """While a long unit runs: redraw the bar, or print the line once a period passed."""
         wait = DELAY_S
         while not self._stop.wait(wait):
             with self._lock:
+                if self._bar is not None:
+                    self._bar.update(0)     # shows the bar after its delay, and the time
+                    wait = 0.5
+                    continue
                 if self._lines and self.clock() >= self._next:
                     self._line()
                     self._next = self.clock() + self.period

@@ -3,6 +3,7 @@
 import argparse
 import sys
 
+from fpc_gripper.progress import Progress
 from fpc_gripper.tools import add_version, OutputDir, run
 from .data import DataError, read_loading, read_markers, read_markers_mcap, read_tensile
 from .fit import calibrate, DEFAULT_FIT, FIT_SEGMENTS
@@ -71,6 +72,9 @@ def _parser():
     p.add_argument('--out', required=True, help='output directory')
     p.add_argument('--force', action='store_true',
                    help='replace the outputs of an earlier run in --out')
+    p.add_argument('--no-progress', dest='progress', action='store_false', default=None,
+                   help='no progress on stderr (default: after a second, a bar on a '
+                        'terminal, a line every few seconds otherwise)')
     p.add_argument('--fit', type=_fit, default=DEFAULT_FIT,
                    help=f'parameters to fit, comma-separated from {",".join(FIT_NAMES)} '
                         f'(default {",".join(DEFAULT_FIT)})')
@@ -138,10 +142,11 @@ def _prepare(args):
         raise DataError('give data to fit: --markers, --loading or --tensile')
 
     def job():
-        result = calibrate(design, markers=markers, loading=loading, tensile=tensile,
-                           fit=args.fit, marker_noise=args.marker_noise,
-                           force_noise=args.force_noise, stress_noise=args.stress_noise,
-                           n_segments=args.segments, max_nfev=args.max_evaluations)
+        with Progress(1, 'fit', 'fpc-calibrate', show=args.progress):
+            result = calibrate(design, markers=markers, loading=loading, tensile=tensile,
+                               fit=args.fit, marker_noise=args.marker_noise,
+                               force_noise=args.force_noise, stress_noise=args.stress_noise,
+                               n_segments=args.segments, max_nfev=args.max_evaluations)
         reason = None if result.success else f"{result.status.name}: {result.message.rstrip('.')}"
         with out:
             paths = write_outputs(result, out.tmp)

@@ -622,7 +622,8 @@ def _run(args, out, err):
     elif args.command == 'plot':
         from .plots import make_plots
         target = OutputDir(args.output, args.force, 'OUTDIR')
-        with Recording(args.input, skip_undecodable=True) as f, target:
+        with Recording(args.input, skip_undecodable=True) as f, target, \
+                Progress(1, 'recording', 'fpc-mcap plot', stream=err):
             written = make_plots(f, target.tmp, times=args.times, size=args.size,
                                  dpi=args.dpi, atmospheric_pressure=args.atmospheric_pressure)
             target.commit()
@@ -631,15 +632,17 @@ def _run(args, out, err):
             print(target.final(path), file=out)
     elif args.command == 'export-csv':
         target = OutputDir(args.output, args.force, 'OUTDIR')
-        with Recording(args.input, skip_undecodable=True) as f, target:
+        with Recording(args.input, skip_undecodable=True) as f, target, \
+                Progress(1, 'recording', 'fpc-mcap export-csv', stream=err):
             written = export_csv(f, target.tmp, topics=args.topics)
             target.commit()
             skipped = f.undecodable
         for path in written.values():
             print(target.final(path), file=out)
     elif args.command == 'recover':
-        report = recover(args.input, args.output, compression=args.compression,
-                         overwrite=args.force)
+        with Progress(1, 'recording', 'fpc-mcap recover', stream=err):
+            report = recover(args.input, args.output, compression=args.compression,
+                             overwrite=args.force)
         if not report.complete:
             state = f'cut off or damaged ({report.dropped_bytes} bytes unreadable)'
         elif report.indexed_chunks:
