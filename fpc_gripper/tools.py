@@ -9,7 +9,8 @@ import shutil
 import sys
 
 __all__ = ['EXIT_CODES', 'EXIT_DONE', 'EXIT_FAILED', 'EXIT_INPUT', 'EXIT_SKIPPED',
-           'EXIT_INTERRUPTED', 'FAILED_MARKER', 'InputError', 'JobFailed', 'OutputDir',
+           'EXIT_INTERRUPTED', 'FAILED_MARKER', 'InputError', 'JobFailed', 'OUTPUT_MARKER',
+           'OutputDir',
            'add_version', 'run', 'version_text']
 
 #: The job was done.
@@ -33,6 +34,8 @@ exit status (the same for every fpc tool):
   130  interrupted (Ctrl-C)"""
 #: The file a failed run leaves in its output directory, saying why.
 FAILED_MARKER = 'FAILED.txt'
+#: The file that marks a directory as a tool's output: only such a one is replaced.
+OUTPUT_MARKER = '.fpc_gripper_output'
 #: Errors of bad input when raised before the job starts, or of a failed job after.
 _ERRORS = (ValueError, TypeError, OSError, RuntimeError, ArithmeticError)
 
@@ -174,9 +177,11 @@ class OutputDir:
     """
     A tool's output directory, written whole or not at all.
 
-    `check` (before any work) refuses an existing, non-empty directory without `force`
-    and a path that is not a directory. Entered, it makes an empty temporary directory
-    beside the target (`tmp`), where the job writes. `commit` moves it into place, in
+    `check` (before any work) refuses a path that is not a directory, the working
+    directory or one above it, a non-empty directory without `OUTPUT_MARKER` (the tools
+    never replace a directory they did not write) and an earlier output without `force`.
+    Entered, it makes an empty temporary directory beside the target (`tmp`), where the
+    job writes. `commit` moves it into place, in
     place of any earlier outputs: a successful run leaves exactly its files; a run that
     produced nothing usable (``commit(failed=reason)``) leaves its diagnostics and
     `FAILED_MARKER`, never an earlier run's results beside them. An exception before
@@ -201,12 +206,21 @@ class OutputDir:
         self.replaced = []
 
     def check(self):
-        """Raise InputError for a path that is a file, or holds outputs and no `force`."""
+        """Raise InputError for a file, a directory of other files, or outputs without force."""
         if self.path.exists() and not self.path.is_dir():
             raise InputError(f'{self.flag} {self.path}: exists and is not a directory')
-        if self.path.is_dir() and any(self.path.iterdir()) and not self.force:
-            raise InputError(f'{self.flag} {self.path}: already holds outputs; pass --force '
-                             'to replace them')
+        resolved = self.path.resolve()
+        if resolved == pathlib.Path.cwd().resolve() or resolved in pathlib.Path.cwd().parents:
+            raise InputError(f'{self.flag} {self.path}: is the working directory or above it; '
+                             'name a new directory for the outputs')
+        if self.path.is_dir() and any(self.path.iterdir()):
+            if not (self.path / OUTPUT_MARKER).exists():
+                # --force replaces the whole directory: never one an fpc tool did not write.
+                raise InputError(f'{self.flag} {self.path}: holds files that no fpc tool '
+                                 'wrote; name a new or empty directory')
+            if not self.force:
+                raise InputError(f'{self.flag} {self.path}: already holds outputs; pass '
+                                 '--force to replace them')
         return self
 
     def __enter__(self):
@@ -238,12 +252,15 @@ class OutputDir:
             Names of the earlier outputs this replaced.
 
         """
+        (self.tmp / OUTPUT_MARKER).write_text('outputs of an fpc_gripper tool; --force '
+                                              'replaces this directory whole\n')
         if failed is not None:
             (self.tmp / FAILED_MARKER).write_text(
                 f'This run failed: {failed}\nNo file here is a usable result.\n')
         old = None
         if self.path.exists():
-            self.replaced = sorted(p.name for p in self.path.iterdir())
+            self.replaced = sorted(p.name for p in self.path.iterdir()
+                                   if p.name != OUTPUT_MARKER)
             old = self.path.parent / f'.{self.path.name}.{os.getpid()}.old'
             shutil.rmtree(old, ignore_errors=True)
             os.replace(self.path, old)

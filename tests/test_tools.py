@@ -9,7 +9,7 @@ from fpc_gripper.design.cli import build_parser as design_parser
 from fpc_gripper.grasp.cli import build_parser as grasp_parser
 from fpc_gripper.io.cli import build_parser as mcap_parser
 from fpc_gripper.progress import Progress
-from fpc_gripper.tools import EXIT_CODES, FAILED_MARKER, InputError, OutputDir
+from fpc_gripper.tools import EXIT_CODES, FAILED_MARKER, InputError, OUTPUT_MARKER, OutputDir
 
 TOOLS = {
     'fpc-mcap': (mcap_parser, ['info', 'plot', 'export-csv', 'recover', 'replay-model']),
@@ -56,24 +56,42 @@ def _files(path):
     return sorted(p.name for p in path.iterdir())
 
 
+def _earlier_output(path, *names):
+    path.mkdir()
+    (path / OUTPUT_MARKER).write_text('')
+    for name in names:
+        (path / name).write_text('earlier')
+
+
 def test_an_output_directory_is_written_whole(tmp_path):
     target = tmp_path / 'deep' / 'out'
     with OutputDir(target) as out:
         (out.tmp / 'a.csv').write_text('new')
         assert not target.exists()
         assert out.commit() == []
-    assert _files(target) == ['a.csv'] and _files(target.parent) == ['out']
+    assert _files(target) == [OUTPUT_MARKER, 'a.csv'] and _files(target.parent) == ['out']
 
 
 def test_existing_outputs_need_force_and_are_replaced_not_merged(tmp_path):
-    (tmp_path / 'out').mkdir()
-    (tmp_path / 'out' / 'old.yaml').write_text('earlier')
+    _earlier_output(tmp_path / 'out', 'old.yaml')
     with pytest.raises(InputError, match='--out .*already holds outputs; pass --force'):
         OutputDir(tmp_path / 'out').check()
     with OutputDir(tmp_path / 'out', force=True) as out:
         (out.tmp / 'new.csv').write_text('new')
         assert out.commit() == ['old.yaml']
-    assert _files(tmp_path / 'out') == ['new.csv'] and _files(tmp_path) == ['out']
+    assert _files(tmp_path / 'out') == [OUTPUT_MARKER, 'new.csv'] and _files(tmp_path) == ['out']
+
+
+def test_force_never_replaces_a_directory_no_tool_wrote(tmp_path, monkeypatch):
+    (tmp_path / 'home').mkdir()
+    (tmp_path / 'home' / 'thesis.tex').write_text('precious')
+    with pytest.raises(InputError, match='holds files that no fpc tool wrote'):
+        OutputDir(tmp_path / 'home', force=True).check()
+    monkeypatch.chdir(tmp_path / 'home')
+    for path in ('.', '..'):
+        with pytest.raises(InputError, match='the working directory or above it'):
+            OutputDir(path, force=True).check()
+    assert _files(tmp_path / 'home') == ['thesis.tex']
 
 
 def test_a_file_is_not_an_output_directory(tmp_path):
@@ -83,23 +101,21 @@ def test_a_file_is_not_an_output_directory(tmp_path):
 
 
 def test_a_crash_leaves_the_earlier_outputs_and_says_so(tmp_path):
-    (tmp_path / 'out').mkdir()
-    (tmp_path / 'out' / 'old.yaml').write_text('earlier')
+    _earlier_output(tmp_path / 'out', 'old.yaml')
     with pytest.raises(RuntimeError) as error:
         with OutputDir(tmp_path / 'out', force=True) as out:
             (out.tmp / 'half.csv').write_text('half')
             raise RuntimeError('solver broke')
     assert "unchanged (it holds an earlier run's outputs)" in error.value.__notes__[0]
-    assert _files(tmp_path) == ['out'] and _files(tmp_path / 'out') == ['old.yaml']
+    assert _files(tmp_path) == ['out'] and _files(tmp_path / 'out') == [OUTPUT_MARKER, 'old.yaml']
 
 
 def test_a_failed_run_is_marked_and_replaces_an_earlier_success(tmp_path):
-    (tmp_path / 'out').mkdir()
-    (tmp_path / 'out' / 'actuator.yaml').write_text('an earlier success')
+    _earlier_output(tmp_path / 'out', 'actuator.yaml')
     with OutputDir(tmp_path / 'out', force=True) as out:
         (out.tmp / 'report.json').write_text('{}')
         out.commit(failed='the fit did not converge')
-    assert _files(tmp_path / 'out') == [FAILED_MARKER, 'report.json']
+    assert _files(tmp_path / 'out') == [OUTPUT_MARKER, FAILED_MARKER, 'report.json']
     assert 'the fit did not converge' in (tmp_path / 'out' / FAILED_MARKER).read_text()
 
 

@@ -370,7 +370,8 @@ def test_a_failed_fit_over_an_earlier_success_leaves_nothing_that_looks_deployab
     captured = capsys.readouterr()
     assert 'MAX_EVALUATIONS' in captured.err and 'Traceback' not in captured.err
     assert 'replaced the earlier outputs' in captured.out
-    assert sorted(p.name for p in out.iterdir()) == ['FAILED.txt', 'report.json', 'report.png']
+    names = sorted(p.name for p in out.iterdir())
+    assert names == ['.fpc_gripper_output', 'FAILED.txt', 'report.json', 'report.png']
     assert json.loads((out / 'report.json').read_text())['success'] is False
     assert sorted(p.name for p in tmp_path.iterdir()) == ['base.yaml', 'calibrated']
 

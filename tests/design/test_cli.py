@@ -116,5 +116,5 @@ def test_outputs_need_force_and_are_replaced_whole(tmp_path, capsys):
     assert (tmp_path / 'x' / 'stale.txt').is_file()
     code, out, _ = _run(capsys, *args, '--force')
     assert code == 0 and 'replaced the earlier outputs' in out
-    names = sorted(p.name for p in (tmp_path / 'x').iterdir())
+    names = sorted(p.name for p in (tmp_path / 'x').iterdir() if p.name[0] != '.')
     assert names == ['base_design.yaml', 'sweep.csv']

@@ -15,6 +15,7 @@ from rclpy.serialization import serialize_message
 from fpc_gripper.io.cli import main
 from fpc_gripper.io.mcap_reader import McapFile
 from fpc_gripper.io.mcap_writer import Rosbag2McapWriter
+from fpc_gripper.tools import OUTPUT_MARKER
 
 
 @pytest.fixture(scope='module')
@@ -62,8 +63,8 @@ def test_export_csv_flattens_fields(capsys, recording, tmp_path):
     code, _, err = run(capsys, 'export-csv', recording, out_dir, '--topics',
                        '/finger_0/pressure', '/finger_1/shape')
     assert code == 0, err
-    assert sorted(p.name for p in out_dir.iterdir()) == ['finger_0__pressure.csv',
-                                                         'finger_1__shape.csv']
+    names = sorted(p.name for p in out_dir.iterdir() if p.name[0] != '.')
+    assert names == ['finger_0__pressure.csv', 'finger_1__shape.csv']
     with open(out_dir / 'finger_0__pressure.csv', newline='') as handle:
         rows = list(csv.DictReader(handle))
     assert len(rows) == 40
@@ -83,7 +84,7 @@ def test_plot_writes_pngs_of_the_requested_size(capsys, recording, tmp_path, siz
     code, out, err = run(capsys, 'plot', recording, out_dir, '--times', '0,0.5,1.9',
                          '--size', f'{size[0]}x{size[1]}')
     assert code == 0, err
-    names = sorted(p.name for p in out_dir.iterdir())
+    names = sorted(p.name for p in out_dir.iterdir() if p.name[0] != '.')
     assert names == ['curvature.png', 'pressure.png', 'shapes.png']
     for name in names:
         image = matplotlib.image.imread(out_dir / name)
@@ -153,6 +154,7 @@ def test_bad_input_fails_cleanly(capsys, recording, tmp_path, kind, command):
     sentinel = out / 'replayed.mcap'
     sentinel.write_bytes(b'previous output')
     (out / 'curvature.png').write_bytes(b'previous plot')
+    (out / OUTPUT_MARKER).write_text('an earlier run')
     before = sorted(p.name for p in tmp_path.rglob('*'))
     code, _, err = run(capsys, *_commands(bad, out)[command])
     assert code == 2
@@ -256,7 +258,7 @@ def test_every_command_reads_a_bag_directory_as_the_single_file(
         assert (tmp_path / 'split' / csv_file.name).read_text() == csv_file.read_text()
     code, _, err = run(capsys, 'plot', bag_directory, tmp_path / 'plots')
     assert code == 0, err
-    assert sorted(p.name for p in (tmp_path / 'plots').iterdir()) == [
+    assert sorted(p.name for p in (tmp_path / 'plots').iterdir() if p.name[0] != '.') == [
         'curvature.png', 'pressure.png', 'shapes.png']
     code, out, err = run(capsys, 'recover', bag_directory, tmp_path / 'joined.mcap')
     assert code == 0, err
