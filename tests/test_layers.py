@@ -9,9 +9,9 @@ PACKAGE = pathlib.Path(__file__).resolve().parents[1] / 'fpc_gripper'
 #: Layers, bottom up: a package imports only from its own or a lower one. The command-line
 #: tools (every `cli.py`) sit above all but the nodes; the launch files' support (it builds
 #: the URDF from the gripper config) sits with the nodes.
-RANK = {'safe_yaml': 0, 'data': 0, 'model': 1, 'io': 2, 'services': 2,
-        'grasp': 3, 'regulators': 3, 'control': 4, 'design': 4, 'calibration': 4,
-        'tools': 5, 'nodes': 6, 'launch_support': 6}
+RANK = {'safe_yaml': 0, 'data': 0, 'ranges': 0, 'progress': 0,
+        'model': 1, 'io': 2, 'services': 2, 'grasp': 3, 'regulators': 3, 'control': 4,
+        'design': 4, 'calibration': 4, 'tools': 5, 'nodes': 6, 'launch_support': 6}
 #: Packages below the nodes: ROS-free services, physics, studies and tools' cores.
 ROS_FREE = ('model', 'services', 'regulators', 'control', 'grasp', 'design', 'calibration')
 ROS_MODULES = ('rclpy', 'std_msgs', 'sensor_msgs', 'geometry_msgs', 'nav_msgs',

@@ -3,7 +3,9 @@
 import argparse
 import sys
 
-from .data import DataError, read_markers_mcap
+from fpc_gripper.progress import Progress
+from fpc_gripper.tools import add_version, OutputDir, run
+from .data import DataError, read_loading, read_markers, read_markers_mcap, read_tensile
 from .fit import calibrate, DEFAULT_FIT, FIT_SEGMENTS
 from .parameters import FIT_NAMES, parse_fit
 from .report import write_outputs
@@ -19,7 +21,13 @@ Markers may also come from an MCAP recording (--markers run.mcap): a
 geometry_msgs/PoseArray topic of marker positions (--markers-topic, one pose per
 marker, root to tip, arc lengths in --marker-s) and the pressure topic
 (sensor_msgs/FluidPressure, absolute Pa; --pressure-topic).
-Exit status: 0 calibrated, 1 the fit failed (report.json says why), 2 bad input."""
+A calibration of the shipped example data (examples/calibration/README.md):
+  fpc-calibrate --design msg_configs/actuator_paper.yaml \\
+      --markers examples/calibration/markers.csv \\
+      --loading examples/calibration/loading.csv \\
+      --fit prestrain,fl_modulus,pressure_work_factor --out calibrated/
+--out is written whole or not at all: a failed fit leaves report.json, report.png
+and FAILED.txt there, and no actuator.yaml or gripper.yaml."""
 
 
 def _arc_lengths(text):
@@ -28,6 +36,21 @@ def _arc_lengths(text):
     except ValueError:
         raise argparse.ArgumentTypeError(f'--marker-s must be comma-separated arc lengths '
                                          f'[m], got {text!r}') from None
+
+
+def _positive(kind):
+    """Return an argparse type: a finite `kind` number > 0."""
+    def convert(text):
+        try:
+            value = kind(text)
+        except ValueError:
+            value = None
+        if value is None or not value > 0 or value != value or value == float('inf'):
+            raise argparse.ArgumentTypeError(f'must be a finite {kind.__name__} > 0, got '
+                                             f'{text!r}')
+        return value
+    convert.__name__ = kind.__name__
+    return convert
 
 
 def _fit(text):
@@ -47,18 +70,23 @@ def _parser():
     p.add_argument('--loading', help='loading.csv')
     p.add_argument('--tensile', help='tensile.csv (constrains emc)')
     p.add_argument('--out', required=True, help='output directory')
+    p.add_argument('--force', action='store_true',
+                   help='replace the outputs of an earlier run in --out')
+    p.add_argument('--no-progress', dest='progress', action='store_false', default=None,
+                   help='no progress on stderr (default: after a second, a bar on a '
+                        'terminal, a line every few seconds otherwise)')
     p.add_argument('--fit', type=_fit, default=DEFAULT_FIT,
                    help=f'parameters to fit, comma-separated from {",".join(FIT_NAMES)} '
                         f'(default {",".join(DEFAULT_FIT)})')
-    p.add_argument('--marker-noise', type=float, default=0.3e-3, metavar='M',
+    p.add_argument('--marker-noise', type=_positive(float), default=0.3e-3, metavar='M',
                    help='standard deviation of a marker coordinate [m] (default 0.3e-3)')
-    p.add_argument('--force-noise', type=float, default=0.02, metavar='N',
+    p.add_argument('--force-noise', type=_positive(float), default=0.02, metavar='N',
                    help='standard deviation of a loading-test force [N] (default 0.02)')
-    p.add_argument('--stress-noise', type=float, default=5e3, metavar='PA',
+    p.add_argument('--stress-noise', type=_positive(float), default=5e3, metavar='PA',
                    help='standard deviation of a tensile stress [Pa] (default 5e3)')
-    p.add_argument('--segments', type=int, default=FIT_SEGMENTS,
+    p.add_argument('--segments', type=_positive(int), default=FIT_SEGMENTS,
                    help=f"segments of the fit's PCC model (default {FIT_SEGMENTS})")
-    p.add_argument('--max-evaluations', type=int, default=100,
+    p.add_argument('--max-evaluations', type=_positive(int), default=100,
                    help='largest number of residual evaluations (default 100)')
     mcap = p.add_argument_group('markers from MCAP')
     mcap.add_argument('--marker-s', type=_arc_lengths,
@@ -69,12 +97,14 @@ def _parser():
                       help='sensor_msgs/FluidPressure topic (default /finger_0/pressure)')
     mcap.add_argument('--atmospheric-pressure', type=float, default=101325.0,
                       help='absolute - gauge [Pa] (default 101325)')
-    return p
+    return add_version(p)
 
 
 def _markers(args, design):
-    if args.markers is None or not args.markers.endswith('.mcap'):
-        return args.markers
+    if args.markers is None:
+        return None
+    if not args.markers.endswith('.mcap'):
+        return read_markers(args.markers, design)
     if not args.marker_s:
         raise DataError(f'{args.markers}: an MCAP recording needs --marker-s, the arc length '
                         'of every marker [m]')
@@ -100,22 +130,42 @@ def _summary(result, paths):
     return '\n'.join(lines)
 
 
-def main(argv=None):
-    """Run fpc-calibrate; return the exit status (0 calibrated, 1 fit failed, 2 bad input)."""
+def _prepare(args):
+    """Check the design, the data and --out; return the job (the fit and its files)."""
     from ..model import ActuatorDesign
-    args = _parser().parse_args(argv)
-    try:
-        design = ActuatorDesign.from_yaml(args.design)
-        result = calibrate(design, markers=_markers(args, design), loading=args.loading,
-                           tensile=args.tensile, fit=args.fit, marker_noise=args.marker_noise,
-                           force_noise=args.force_noise, stress_noise=args.stress_noise,
-                           n_segments=args.segments, max_nfev=args.max_evaluations)
-    except (DataError, ValueError, TypeError) as exc:
-        print(f'fpc-calibrate: error: {exc}', file=sys.stderr)
-        return 2
-    paths = write_outputs(result, args.out)
-    print(_summary(result, paths))
-    return 0 if result.success else 1
+    out = OutputDir(args.out, args.force).check()
+    design = ActuatorDesign.from_yaml(args.design)
+    markers = _markers(args, design)
+    loading = read_loading(args.loading, design) if args.loading else None
+    tensile = read_tensile(args.tensile, design) if args.tensile else None
+    if markers is None and loading is None and tensile is None:
+        raise DataError('give data to fit: --markers, --loading or --tensile')
+
+    def job():
+        with Progress(1, 'fit', 'fpc-calibrate', show=args.progress):
+            result = calibrate(design, markers=markers, loading=loading, tensile=tensile,
+                               fit=args.fit, marker_noise=args.marker_noise,
+                               force_noise=args.force_noise, stress_noise=args.stress_noise,
+                               n_segments=args.segments, max_nfev=args.max_evaluations)
+        reason = None if result.success else f"{result.status.name}: {result.message.rstrip('.')}"
+        with out:
+            paths = write_outputs(result, out.tmp)
+            out.commit(failed=reason)
+        paths = {kind: out.final(path) for kind, path in paths.items()}
+        print(_summary(result, paths))
+        if out.replaced:
+            print(out.replaced_note())
+        if reason is not None:
+            print(f'fpc-calibrate: failed: {reason}; {out.path} holds its report and '
+                  'no design', file=sys.stderr)
+            return 1
+        return 0
+    return job
+
+
+def main(argv=None):
+    """Run fpc-calibrate; return the exit status of `fpc_gripper.tools.EXIT_CODES`."""
+    return run(_parser(), _prepare, argv, input_errors=(DataError,))
 
 
 if __name__ == '__main__':

@@ -23,7 +23,7 @@ def write_outputs(result, out_dir):
     Write a calibration's files into `out_dir` (created if missing).
 
     ``report.json`` (`CalibrationResult.report`) and ``report.png`` (`plot_report`)
-    always; with a valid design also ``actuator.yaml`` (`ActuatorDesign.to_yaml`) and
+    always; for a successful fit also ``actuator.yaml`` (`ActuatorDesign.to_yaml`) and
     ``gripper.yaml``, the package's default gripper with that actuator on every finger, for
     ``model_node --ros-args -p gripper_config:=<out_dir>/gripper.yaml``. Each file is
     written to a temporary name and moved into place when complete.
@@ -37,7 +37,8 @@ def write_outputs(result, out_dir):
     out = pathlib.Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths = {}
-    if result.design is not None:
+    # A failed fit's estimates stay in report.json: no file of it may look deployable.
+    if result.success and result.design is not None:
         paths['actuator'] = out / 'actuator.yaml'
         with atomic_output(paths['actuator']) as tmp:
             result.design.to_yaml(tmp)

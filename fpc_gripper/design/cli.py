@@ -1,24 +1,26 @@
 """The ``fpc-design`` command: parametric sweeps, the paper's figures and inverse design."""
 
 import argparse
-import pathlib
 import sys
 import time
 
+from fpc_gripper.ranges import RANGE_HELP
+from fpc_gripper.tools import add_version, JobFailed, OutputDir, run
+
 __all__ = ['build_parser', 'main']
 
-_EPILOG = """\
+_EPILOG = f"""\
 examples:
-  fpc-design sweep --vary prestrain=0.15,0.25,0.40 --vary Cy=22e-3:30e-3:5 --out out/sweep
-  fpc-design sweep --vary prestrain=0.15:0.40:6 --pressure 0:400e3:5e3 --rigidity \\
-      --scheduler local:2 --format parquet --out out/sweep
+  fpc-design sweep --vary prestrain=0.15,0.25,0.40 --vary Cy=22e-3:30e-3/3 --out out/sweep
+  fpc-design sweep --vary prestrain=0.15:0.40/6 --pressure 0:400e3:20e3 --rigidity \\
+      --format parquet --out out/sweep2
   fpc-design sweep --figure 7 --out out/figures
-  fpc-design optimize --closed-aperture 0.03 --open-aperture 0.12 --pressure-budget 250e3 \\
-      --kx 1.0e-3 --at-aperture 0.08 --max-strain 0.6 --out out/design
+  fpc-design optimize --closed-aperture 0.010 --open-aperture 0.09 \\
+      --pressure-budget 250e3 --tip-force 0.05 --at-aperture 0.03 --max-strain 0.6 \\
+      --maxiter 4 --out out/design
 
-Ranges: start:stop:count when the third part is a plain integer (16e-3:30e-3:8, as
-numpy.linspace), start:stop:step otherwise (0:400e3:5e3). SI units throughout.
-Dask (--scheduler) is optional: pip install 'fpc_gripper[dask]'.
+{RANGE_HELP}
+Dask (--scheduler local:N or tcp://host:port) is optional: pip install 'fpc_gripper[dask]'.
 """
 
 
@@ -34,8 +36,8 @@ def build_parser():
     sweep.add_argument('--design', metavar='FILE',
                        help='base actuator YAML (default: the paper finger, prestrain 0.25)')
     sweep.add_argument('--vary', action='append', default=[], metavar='FIELD=VALUES',
-                       help='ActuatorDesign field and its values (repeatable; the last '
-                            'varies fastest)')
+                       help='ActuatorDesign field and its values (repeatable for other '
+                            'fields; the last varies fastest)')
     sweep.add_argument('--pressure', default='0:400e3:5e3', metavar='VALUES',
                        help='gauge pressures [Pa] (default 0:400e3:5e3)')
     _model_arguments(sweep)
@@ -87,6 +89,8 @@ def build_parser():
     opt.add_argument('--popsize', type=int, default=10,
                      help='population per parameter (default 10)')
     _run_arguments(opt, scheduler=False)
+    for sub in (parser, sweep, opt):
+        add_version(sub)
     return parser
 
 
@@ -102,6 +106,8 @@ def _model_arguments(parser):
 
 def _run_arguments(parser, scheduler=True):
     parser.add_argument('--out', required=True, metavar='DIR', help='output directory')
+    parser.add_argument('--force', action='store_true',
+                        help='replace the outputs of an earlier run in --out')
     if scheduler:
         parser.add_argument('--scheduler', metavar='ADDRESS',
                             help="Dask: 'local:N' (a LocalCluster of N workers) or "
@@ -110,8 +116,10 @@ def _run_arguments(parser, scheduler=True):
                             help='designs per task (default: about 16 tasks on Dask or with '
                                  'a progress bar, else one batch); never changes a row')
     parser.add_argument('--progress', dest='progress', action='store_true', default=None,
-                        help='always show the progress bar (default: on a terminal)')
-    parser.add_argument('--no-progress', dest='progress', action='store_false')
+                        help='show progress on stderr (the default: after a second, a bar '
+                             'on a terminal, a line every few seconds otherwise)')
+    parser.add_argument('--no-progress', dest='progress', action='store_false',
+                        help='no progress on stderr')
 
 
 def _settings(args):
@@ -127,49 +135,96 @@ def _settings(args):
     return ModelSettings(**fields) if fields else model_settings(args.model)
 
 
-def _sweep(args, out, err):
-    from .charts import sweep_charts, write_table
+def _prepare_sweep(args):
+    """Check the sweep's inputs and --out; return its job."""
+    from fpc_gripper.model import batch
     from .grid import base_design, parse_assignment, parse_values
-    from .runner import dask_available, DASK_HINT
-    from .parametric import sweep
-    out_dir = pathlib.Path(args.out)
+    from .runner import _parse, dask_available, DASK_HINT
+    out = OutputDir(args.out, args.force).check()
     design = base_design(args.design)
-    start = time.perf_counter()
+    if args.scheduler is not None:
+        _parse(args.scheduler)
+        if not dask_available():
+            raise ValueError(f'`scheduler` {args.scheduler!r} needs dask.distributed: '
+                             f'{DASK_HINT}')
     if args.figure is not None:
-        from .figures import figure
         if args.vary:
-            raise ValueError('--figure fixes its own axes: drop --vary')
-        out_dir.mkdir(parents=True, exist_ok=True)
-        frame = figure(args.figure, out_dir, design, args.scheduler, args.progress)
-        print(f'figure {args.figure}: {len(frame)} rows in {time.perf_counter() - start:.2f} s '
-              f'-> {out_dir}/figure_{args.figure}.png, .csv', file=out)
-        return 0
-    vary = dict(parse_assignment(v) for v in args.vary)
+            raise ValueError('`figure` fixes its own axes: drop `vary`')
+        return lambda: _figure(args, design, out)
+    vary = {}
+    for text in args.vary:
+        field, values = parse_assignment(text)
+        if field in vary:
+            raise ValueError(f'`vary` names {field} twice; give all its values once '
+                             f'({field}=a,b,c)')
+        vary[field] = values
     pressures = parse_values(args.pressure, '--pressure')
-    if args.scheduler is None and not dask_available():
-        print(f'fpc-design sweep: running in this process; {DASK_HINT}', file=err)
-    frame = sweep(vary, pressures, design, _settings(args), args.rigidity, args.displacement,
-                  args.scale_w1, args.scheduler, args.chunk, args.progress)
-    elapsed = time.perf_counter() - start
-    out_dir.mkdir(parents=True, exist_ok=True)
-    table = write_table(frame, out_dir / f'sweep.{args.format}', args.format)
-    design.to_yaml(out_dir / 'base_design.yaml')
-    charts = [] if args.no_charts else sweep_charts(frame, out_dir)
-    bad = frame[frame['status'] != 'ok']
-    print(f'{frame["design_id"].nunique()} designs x {len(pressures)} pressures = '
-          f'{len(frame)} rows in {elapsed:.2f} s ({len(frame) / elapsed:.0f} rows/s); '
-          f'{int(frame["success"].sum())} solved', file=out)
-    for status, rows in bad.groupby('status'):
-        example = rows['message'].iloc[0]
-        print(f'  {status}: {len(rows)} rows ({rows["design_id"].nunique()} designs), '
-              f'e.g. {example}', file=out)
-    print(f'-> {table}' + ''.join(f', {c}' for c in charts), file=out)
+    if pressures.min() < 0.0:
+        raise ValueError(f'`pressure` must be >= 0 (gauge) [Pa], got {args.pressure!r}')
+    pressures = batch.check_pressures(pressures)
+    if not (0.0 < args.displacement < float('inf')):
+        raise ValueError(f'`displacement` must be finite and > 0 [m], got {args.displacement}')
+    if args.chunk is not None and args.chunk < 1:
+        raise ValueError(f'`chunk` must be >= 1, got {args.chunk}')
+    settings = _settings(args)
+    return lambda: _sweep(args, design, vary, pressures, settings, out)
+
+
+def _figure(args, design, out):
+    from fpc_gripper.progress import Progress
+    from .figures import figure
+    start = time.perf_counter()
+    # One unit: off a terminal its heartbeat is the line every few seconds.
+    with out, Progress(1, 'figure', 'fpc-design sweep', show=args.progress) as progress:
+        frame = figure(args.figure, out.tmp, design, args.scheduler, False)
+        progress.update()
+        solved = int(frame['success'].sum())
+        out.commit(failed=None if solved else 'no row of the figure was solved')
+    print(f'figure {args.figure}: {len(frame)} rows ({solved} solved) in '
+          f'{time.perf_counter() - start:.2f} s -> {out.path}/figure_{args.figure}.png, .csv')
+    if not solved:
+        raise JobFailed(f'no row of figure {args.figure} was solved')
     return 0
 
 
-def _optimize(args, out, err):
+def _sweep(args, design, vary, pressures, settings, out):
+    from .charts import sweep_charts, write_table
+    from .parametric import sweep
+    from .runner import dask_available, DASK_HINT
+    start = time.perf_counter()
+    if args.scheduler is None and not dask_available():
+        print(f'fpc-design sweep: running in this process; {DASK_HINT}', file=sys.stderr)
+    frame = sweep(vary, pressures, design, settings, args.rigidity, args.displacement,
+                  args.scale_w1, args.scheduler, args.chunk, args.progress)
+    elapsed = time.perf_counter() - start
+    solved = int(frame['success'].sum())
+    bad = frame[frame['status'] != 'ok']
+    why = [f'{status}: {len(rows)} rows ({rows["design_id"].nunique()} designs), e.g. '
+           f'{rows["message"].iloc[0]}' for status, rows in bad.groupby('status')]
+    with out:
+        table = write_table(frame, out.file(f'sweep.{args.format}'), args.format)
+        design.to_yaml(out.file('base_design.yaml'))
+        charts = [] if args.no_charts else sweep_charts(frame, out.tmp)
+        out.commit(failed=None if solved else 'no row solved; ' + '; '.join(why))
+    print(f'{frame["design_id"].nunique()} designs x {len(pressures)} pressures = '
+          f'{len(frame)} rows in {elapsed:.2f} s ({len(frame) / elapsed:.0f} rows/s); '
+          f'{solved} solved')
+    for line in why:
+        print(f'  {line}')
+    print(f'-> {out.final(table)}' + ''.join(f', {out.final(c)}' for c in charts))
+    if out.replaced:
+        print(out.replaced_note())
+    if not solved:
+        raise JobFailed(f'none of the {len(frame)} rows was solved ({"; ".join(why)}); '
+                        f'{out.path} holds the table and FAILED.txt')
+    return 0
+
+
+def _prepare_optimize(args):
+    """Check the targets, the search and --out; return the search's job."""
     from .grid import base_design, parse_values
-    from .inverse import optimize, Targets, write_outputs
+    from .inverse import check_search, palm_radius, PARAMETERS, Targets
+    out = OutputDir(args.out, args.force).check()
     targets = Targets(closed_aperture=args.closed_aperture, open_aperture=args.open_aperture,
                       pressure_budget=args.pressure_budget, kx=args.kx,
                       tip_force=args.tip_force, at_aperture=args.at_aperture,
@@ -177,18 +232,41 @@ def _optimize(args, out, err):
     bounds = {}
     for text in args.bounds:
         field, sep, values = text.partition('=')
-        interval = parse_values(values.replace(':', ','), field) if sep else []
+        interval = parse_values(values.replace(':', ','), '--bounds') if sep else []
         if len(interval) != 2:
-            raise ValueError(f'--bounds must be FIELD=LO:HI, got {text!r}')
+            raise ValueError(f'`bounds` must be FIELD=LO:HI, got {text!r}')
         bounds[field.strip()] = tuple(interval)
-    result = optimize(targets, [f.strip() for f in args.vary.split(',') if f.strip()],
-                      base_design(args.design), bounds, args.gripper, _settings(args),
+    parameters = [f.strip() for f in args.vary.split(',') if f.strip()]
+    if not parameters or len(set(parameters)) != len(parameters) \
+            or not set(parameters) <= set(PARAMETERS):
+        raise ValueError(f'`vary` must be distinct names from {", ".join(PARAMETERS)}, got '
+                         f'{args.vary!r}')
+    design = base_design(args.design)
+    check_search(targets, parameters, design, bounds)
+    palm_radius(args.gripper)
+    for name in ('maxiter', 'popsize'):
+        if getattr(args, name) < 1:
+            raise ValueError(f'`{name}` must be >= 1, got {getattr(args, name)}')
+    settings = _settings(args)
+    return lambda: _optimize(args, targets, parameters, design, bounds, settings, out)
+
+
+def _optimize(args, targets, parameters, design, bounds, settings, out):
+    from .inverse import optimize, write_outputs
+    result = optimize(targets, parameters, design, bounds, args.gripper, settings,
                       seed=args.seed, maxiter=args.maxiter, popsize=args.popsize,
                       progress=args.progress)
-    files = write_outputs(result, args.out)
-    print(result.report(), file=out)
-    print('-> ' + ', '.join(str(f) for f in files), file=out)
-    return 0 if result.success else 3
+    with out:
+        files = write_outputs(result, out.tmp)
+        out.commit(failed=None if result.success else result.message)
+    print(result.report())
+    print('-> ' + ', '.join(str(out.final(f)) for f in files))
+    if out.replaced:
+        print(out.replaced_note())
+    if not result.success:
+        raise JobFailed(f'{result.status}: {result.message}; {out.path} holds the closest '
+                        'design as closest_actuator.yaml and FAILED.txt')
+    return 0
 
 
 def main(argv=None):
@@ -203,20 +281,15 @@ def main(argv=None):
     Returns
     -------
     int
-        0 on success, 1 for bad input (a message on stderr), 2 for bad usage, 3 when
-        `optimize` cannot meet every target (it still writes its best design).
+        The exit status of `fpc_gripper.tools.EXIT_CODES`: 1 when a sweep solved no row or
+        `optimize` met not every target (it still writes the closest design).
 
     """
-    args = build_parser().parse_args(argv)
-    try:
-        run = _sweep if args.command == 'sweep' else _optimize
-        return run(args, sys.stdout, sys.stderr)
-    except (ValueError, TypeError, OSError) as error:
-        print(f'fpc-design {args.command}: error: {error}', file=sys.stderr)
-        return 1
-    except KeyboardInterrupt:
-        print(f'fpc-design {args.command}: interrupted', file=sys.stderr)
-        return 130
+    parser = build_parser()
+
+    def prepare(args):
+        return (_prepare_sweep if args.command == 'sweep' else _prepare_optimize)(args)
+    return run(parser, prepare, argv)
 
 
 if __name__ == '__main__':

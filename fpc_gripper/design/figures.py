@@ -140,6 +140,10 @@ def figure(number, out_dir=None, design=None, scheduler=None, progress=None):
     return frame
 
 
+#: Sweep statuses of a K where eq. 22 does not apply (`stiffness.RigidityStatus`).
+_FLAGGED = ('small_lever', 'branch_change')
+
+
 def _curves(frame):
     """(curve, n_segments, rows) of the paper's model first, the default model last."""
     curves = frame[['curve', 'n_segments']].drop_duplicates()
@@ -179,6 +183,13 @@ def _draw(number, spec, frame):
                 ax.plot(part['pressure_pa'] / 1e3, part[column], color=f'C{k}',
                         ls='--' if dashed else '-', marker='' if dashed else 'o', ms=3,
                         label=label if ax is axes[0] or not dashed else None)
+            flagged = part[part['status'].isin(_FLAGGED)]
+            axes[1].plot(flagged['pressure_pa'] / 1e3, flagged['kx_nm2'], 'x', color='k',
+                         ms=6, label=None)
+    if frame['status'].isin(_FLAGGED).any():
+        axes[1].plot([], [], 'x', color='k', label='x: eq. 22 does not apply (small lever '
+                                                   'or branch change)')
+        axes[1].legend(fontsize=7)
     axes[0].set_ylabel('curvature [1/m]')
     axes[0].axhline(0.0, color='k', lw=0.5)
     axes[1].set_ylabel('$K_x$ [N·m²] ($\\delta_x$ = 10 mm)')

@@ -2,22 +2,18 @@
 
 import dataclasses
 import itertools
-import math
 import pathlib
-import re
 
 import numpy as np
 
 from fpc_gripper.model import ActuatorDesign
+from fpc_gripper.ranges import MAX_COUNT, parse_range
 
 __all__ = ['DesignPoint', 'base_design', 'design_grid', 'parse_assignment', 'parse_values',
            'sweepable_fields', 'DEFAULT_PRESSURES', 'MAX_COUNT']
 
 #: Default pressure axis: 0 to 400 kPa in 5 kPa steps [Pa].
 DEFAULT_PRESSURES = np.linspace(0.0, 400e3, 81)
-#: Largest number of values one axis may hold (a typo guard: `0:4e5:5000` is a count).
-MAX_COUNT = 100_000
-_INTEGER = re.compile(r'^[+-]?\d+$')
 #: Design fields a sweep may vary: the numeric ones (lengths, prestrain, the pressure limit
 #: and any scalar field a later ActuatorDesign adds).
 _SKIP = {'emc_coefficients', 'ribs', 'constraining_layer', 'fluidic_layer', 'emc'}
@@ -30,57 +26,18 @@ def sweepable_fields():
 
 def parse_values(text, name='values'):
     """
-    Parse an axis: ``a,b,c`` (a list), or ``start:stop:count`` / ``start:stop:step``.
+    Parse an axis: ``a,b,c``, ``start:stop:step`` or ``start:stop/count``.
 
-    The third part of a range is a count when written as a plain integer (``16e-3:30e-3:8``:
-    8 values, as ``numpy.linspace``), and a step otherwise (``0:400e3:5e3``: 0, 5 kPa, ...,
-    400 kPa; the stop is included when the steps land on it).
-
-    Parameters
-    ----------
-    text : str
-    name : str
-        What the values are, for messages.
-
-    Returns
-    -------
-    ndarray of float
+    The syntax of every tool, `fpc_gripper.ranges.parse_range` (a plain integer step,
+    once a count here, is refused).
 
     Raises
     ------
     ValueError
-        Naming `name` and the text, for anything else.
+        Naming `name` and the text.
 
     """
-    text = str(text).strip()
-    try:
-        if ':' in text:
-            parts = text.split(':')
-            if len(parts) != 3:
-                raise ValueError('a range is start:stop:count or start:stop:step')
-            start, stop = float(parts[0]), float(parts[1])
-            if _INTEGER.match(parts[2].strip()):
-                count = int(parts[2])
-                if not 1 <= count <= MAX_COUNT:
-                    raise ValueError(f'a count must be in [1, {MAX_COUNT}], got {count} (write '
-                                     'a step with a decimal point or exponent, e.g. 5e3)')
-                values = np.linspace(start, stop, count)
-            else:
-                step = float(parts[2])
-                if not (math.isfinite(step) and step > 0.0):
-                    raise ValueError(f'a step must be finite and > 0, got {parts[2]}')
-                count = math.floor((stop - start) / step * (1.0 + 1e-12) + 1e-9) + 1
-                if not 1 <= count <= MAX_COUNT:
-                    raise ValueError(f'{start}:{stop}:{step} spans {count} values; at most '
-                                     f'{MAX_COUNT} are allowed')
-                values = start + step * np.arange(count)
-        else:
-            values = np.array([float(v) for v in text.split(',') if v.strip()])
-    except ValueError as error:
-        raise ValueError(f'`{name}`: cannot read {text!r}: {error}') from None
-    if not values.size or not np.all(np.isfinite(values)):
-        raise ValueError(f'`{name}` must be finite numbers, got {text!r}')
-    return values
+    return parse_range(text, f'`{name}`' if not name.startswith(('`', '-')) else name)
 
 
 def parse_assignment(text):
@@ -89,7 +46,7 @@ def parse_assignment(text):
     field = field.strip()
     if not sep or not field:
         raise ValueError(f'`--vary` must be FIELD=VALUES, e.g. prestrain=0.15,0.25, got {text!r}')
-    return _check_field(field), parse_values(values, field)
+    return _check_field(field), parse_values(values, f'--vary {field}')
 
 
 def _check_field(field):

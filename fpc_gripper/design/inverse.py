@@ -10,11 +10,12 @@ from scipy.optimize import brentq, differential_evolution, minimize
 from fpc_gripper.model import batch
 from fpc_gripper.model.discretisations.ccm_geometry import consistent_strain_map, from_scaled
 from fpc_gripper.model.pipeline import finger_model
+from fpc_gripper.model.validation import ENVELOPE
 from .grid import base_design
 from .parametric import model_settings
 
-__all__ = ['Targets', 'DesignSearch', 'optimize', 'peak_strain', 'write_outputs',
-           'PARAMETERS', 'default_bounds']
+__all__ = ['Targets', 'DesignSearch', 'check_search', 'optimize', 'palm_radius',
+           'peak_strain', 'write_outputs', 'PARAMETERS', 'default_bounds']
 
 #: Parameters the search may vary: ActuatorDesign fields, and L, the free length (Lx - Lc,
 #: moving Lx and Cx together so that the channel-free tip keeps its length).
@@ -81,6 +82,12 @@ class Targets:
             object.__setattr__(self, f.name, float(value))
         if not self.pressure_budget > 0.0:
             raise ValueError(f'`pressure_budget` must be > 0 [Pa], got {self.pressure_budget}')
+        # An aperture <= 0 would need the fingertips to cross the palm axis.
+        for name in ('closed_aperture', 'open_aperture', 'at_aperture'):
+            value = getattr(self, name)
+            if value is not None and value <= 0.0:
+                raise ValueError(f'`{name}` must be > 0 [m] (the diameter of the circle '
+                                 f'through the fingertips), got {value}')
         for name in ('kx', 'tip_force', 'max_strain'):
             value = getattr(self, name)
             if value is not None and value <= 0.0:
@@ -355,9 +362,47 @@ class InverseDesign:
         return '\n'.join(lines)
 
 
-def _palm_radius(gripper):
+def palm_radius(gripper=None):
+    """Return the palm radius of a gripper config (default gripper_paper.yaml) [m]."""
     from fpc_gripper.io.config import load_gripper_config
     return load_gripper_config(gripper).palm_radius
+
+
+def check_search(targets, parameters, design, bounds=None):
+    """
+    Check a search's inputs before any solve; return (parameters, base design, box).
+
+    Raises
+    ------
+    TypeError, ValueError
+        Naming the argument: unknown or repeated parameters, bounds of unsearched
+        parameters or not finite with low < high, a pressure budget beyond the model's
+        envelope (`validation.ENVELOPE`, a multiple of the design's max_pressure).
+
+    """
+    if not isinstance(targets, Targets):
+        raise TypeError(f'`targets` must be a Targets, got {type(targets).__name__}')
+    parameters = tuple(parameters)
+    unknown = [p for p in parameters if p not in PARAMETERS]
+    if unknown or not parameters or len(set(parameters)) != len(parameters):
+        raise ValueError(f'`parameters` must be distinct names from {PARAMETERS}, '
+                         f'got {parameters}')
+    base = base_design(design)
+    top = ENVELOPE.pressure_factor * base.max_pressure
+    if targets.pressure_budget > top:
+        raise ValueError(f'`pressure_budget` must be <= {top:.6g} [Pa], '
+                         f'{ENVELOPE.pressure_factor:g} x max_pressure of the design (the '
+                         f'envelope of the model), got {targets.pressure_budget:.6g}')
+    limits = default_bounds(base, parameters)
+    for name, interval in dict(bounds or {}).items():
+        if name not in parameters:
+            raise ValueError(f'`bounds` names {name!r}, which is not searched {parameters}')
+        low, high = (float(v) for v in interval)
+        if not (math.isfinite(low) and math.isfinite(high) and low < high):
+            raise ValueError(f'`bounds[{name!r}]` must be finite with low < high, '
+                             f'got {interval!r}')
+        limits[name] = (low, high)
+    return parameters, base, limits
 
 
 def optimize(targets, parameters=('prestrain', 'Cy', 'h3a'), design=None, bounds=None,
@@ -401,24 +446,8 @@ def optimize(targets, parameters=('prestrain', 'Cy', 'h3a'), design=None, bounds
     """
     import pandas as pd
     from .runner import _bar
-    if not isinstance(targets, Targets):
-        raise TypeError(f'`targets` must be a Targets, got {type(targets).__name__}')
-    parameters = tuple(parameters)
-    unknown = [p for p in parameters if p not in PARAMETERS]
-    if unknown or not parameters or len(set(parameters)) != len(parameters):
-        raise ValueError(f'`parameters` must be distinct names from {PARAMETERS}, '
-                         f'got {parameters}')
-    base = base_design(design)
-    limits = default_bounds(base, parameters)
-    for name, interval in dict(bounds or {}).items():
-        if name not in parameters:
-            raise ValueError(f'`bounds` names {name!r}, which is not searched {parameters}')
-        low, high = (float(v) for v in interval)
-        if not (math.isfinite(low) and math.isfinite(high) and low < high):
-            raise ValueError(f'`bounds[{name!r}]` must be finite with low < high, '
-                             f'got {interval!r}')
-        limits[name] = (low, high)
-    search = DesignSearch(targets, parameters, base, _palm_radius(gripper),
+    parameters, base, limits = check_search(targets, parameters, design, bounds)
+    search = DesignSearch(targets, parameters, base, palm_radius(gripper),
                           model_settings(model))
     box = [limits[p] for p in parameters]
     with _bar(int(maxiter), progress, 'generation') as bar:
@@ -522,7 +551,9 @@ def write_outputs(result, out_dir):
 
     ``actuator.yaml`` is the best design (`ActuatorDesign.to_yaml`); ``gripper.yaml`` the
     three-finger gripper of gripper_paper.yaml with that actuator and the same palm, so
-    ``model_node --ros-args -p gripper_config:=DIR/gripper.yaml`` runs it.
+    ``model_node --ros-args -p gripper_config:=DIR/gripper.yaml`` runs it. When a target
+    is not met the closest design is ``closest_actuator.yaml`` instead, and there is no
+    gripper.yaml: nothing of an unmet search looks deployable.
 
     Returns
     -------
@@ -535,7 +566,10 @@ def write_outputs(result, out_dir):
     out_dir = pathlib.Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     files = []
-    if result.design is not None:
+    if result.design is not None and not result.success:
+        result.design.to_yaml(out_dir / 'closest_actuator.yaml')
+        files.append(out_dir / 'closest_actuator.yaml')
+    elif result.design is not None:
         result.design.to_yaml(out_dir / 'actuator.yaml')
         gripper = yaml.safe_load(default_gripper_config_path().read_text())
         gripper['actuator'] = 'actuator.yaml'

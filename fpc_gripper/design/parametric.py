@@ -7,6 +7,7 @@ import numpy as np
 from fpc_gripper.model import batch
 from fpc_gripper.model.discretisations.ccm import SolverStatus
 from fpc_gripper.model.pipeline import DEFAULT_N_SEGMENTS, ModelSettings
+from fpc_gripper.model.stiffness import RigidityStatus
 from .grid import base_design, DEFAULT_PRESSURES, design_grid
 from .runner import run_chunks, shows_progress
 
@@ -21,9 +22,13 @@ STATUS_OK = 'ok'
 STATUS_INVALID = 'invalid_design'
 #: `status` of a converged CCM state that breaks the small-rotation rule |2 d L_i| < 1.
 STATUS_SMALL_ROTATION = 'small_rotation'
-#: `status` of a row whose equilibrium is fine but whose K_x or K_z was not found.
+#: `status` of a row whose equilibrium is fine but whose K_x or K_z was not found. A K
+#: where eq. 22 does not apply has the `RigidityStatus` name: 'small_lever' or
+#: 'branch_change' (its value is kept, beside the direct stiffness).
 STATUS_RIGIDITY = 'rigidity_failed'
 _SOLVER_STATUS = {int(s): s.name.lower() for s in SolverStatus}
+#: Scenes of a local run above which it is chunked for progress lines off a terminal.
+_SCENES_FOR_PROGRESS = 4000
 #: Tasks of a Dask run, or steps of a progress bar, when the caller does not say.
 _CHUNKS = 16
 
@@ -86,6 +91,8 @@ def solve_designs(designs, pressures, settings, rigidity=(), displacement=0.010)
            'tip_z_m': np.full(rows, np.nan)}
     for axis in rigidity:
         out[f'k{axis}_nm2'] = np.full(rows, np.nan)
+    for axis in rigidity:
+        out[f'k{axis}_direct_n_per_m'] = np.full(rows, np.nan)
     out['success'] = np.zeros(rows, dtype=bool)
     out['status'] = np.full(rows, STATUS_INVALID, dtype=object)
     out['model'] = np.full(rows, '', dtype=object)
@@ -124,12 +131,16 @@ def _solve_block(out, designs, valid, pressures, settings, rigidity, displacemen
     for axis in rigidity:
         k = batch.rigidity_grid([designs[j][0] for j in valid], pressures, axis,
                                 displacement, settings)
-        found = k.success.ravel() & success
-        out[f'k{axis}_nm2'][at] = np.where(found, k.value.ravel(), np.nan)
-        for j in np.flatnonzero(success & ~found):
+        code = k.rigidity_status.ravel()
+        # A flagged K keeps its eq. 22 value beside the direct stiffness; its row says why.
+        got = success & (code != int(RigidityStatus.FAILED))
+        out[f'k{axis}_nm2'][at] = np.where(got, k.value.ravel(), np.nan)
+        out[f'k{axis}_direct_n_per_m'][at] = np.where(got, k.direct_stiffness.ravel(), np.nan)
+        for j in np.flatnonzero(success & ~k.success.ravel()):
             d, p = divmod(int(j), n_p)
             if status[j] == STATUS_OK:
-                status[j] = STATUS_RIGIDITY
+                status[j] = STATUS_RIGIDITY if code[j] == int(RigidityStatus.FAILED) \
+                    else RigidityStatus(code[j]).name.lower()
             message[j] = (message[j] + '; ' if message[j] else '') + \
                 f'K_{axis}: {k.result(d, p).message}'
     out['status'][at] = status
@@ -186,8 +197,10 @@ def sweep(vary=None, pressures=None, design=None, model='default', rigidity=Fals
     pandas.DataFrame
         Columns: ``design_id``, every varied field under its ActuatorDesign name,
         ``pressure_pa``, ``curvature_per_m``, ``tip_x_m``, ``tip_z_m``, (``kx_nm2``,
-        ``kz_nm2`` with `rigidity`), ``success``, ``status`` ('ok', 'invalid_design',
-        a SolverStatus name, 'small_rotation' or 'rigidity_failed'), ``model`` (the
+        ``kz_nm2``, then ``kx_direct_n_per_m``, ``kz_direct_n_per_m``, dF/d delta of the
+        displacement control, with `rigidity`), ``success``, ``status`` ('ok',
+        'invalid_design', a SolverStatus name, 'small_rotation', 'rigidity_failed',
+        'small_lever' or 'branch_change'), ``model`` (the
         rung and N of the scene) and ``message`` (why, where status is not 'ok').
         Numbers are NaN where the solve failed or the design is invalid. ``attrs``
         holds the base design and the settings.
@@ -211,7 +224,11 @@ def sweep(vary=None, pressures=None, design=None, model='default', rigidity=Fals
     if chunk_designs is None:
         # One batch is fastest (designs of one discretisation and options share compiled
         # loops); tasks for Dask and for a progress bar. No chunking changes a row.
-        whole = scheduler is None and not shows_progress(progress)
+        # Off a terminal progress is a line every few seconds: chunk the runs that may
+        # take that long.
+        scenes = len(points) * pressures.size
+        whole = scheduler is None and (progress is False or (
+            not shows_progress(progress) and scenes < _SCENES_FOR_PROGRESS))
         size = len(points) if whole else max(1, math.ceil(len(points) / _CHUNKS))
     else:
         size = int(chunk_designs)

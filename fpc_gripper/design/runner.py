@@ -5,12 +5,12 @@ import logging
 import os
 import sys
 
+from fpc_gripper.progress import Progress
+
 __all__ = ['run_chunks', 'dask_available', 'shows_progress', 'DASK_HINT']
 
 #: How to get the optional Dask extra.
 DASK_HINT = "install the Dask extra (pip install 'fpc_gripper[dask]') to run on a cluster"
-#: A progress bar appears once a run has taken this long [s].
-_PROGRESS_DELAY = 1.0
 
 
 def dask_available():
@@ -24,14 +24,13 @@ def dask_available():
 
 
 def shows_progress(progress):
-    """Whether a run shows its progress bar: as asked, else when stderr is a terminal."""
+    """Whether a run shows a progress bar: as asked, else when stderr is a terminal."""
     return sys.stderr.isatty() if progress is None else bool(progress)
 
 
 def _bar(total, progress, unit):
-    from tqdm.auto import tqdm
-    return tqdm(total=total, unit=unit, disable=not shows_progress(progress),
-                delay=_PROGRESS_DELAY, leave=False)
+    """Progress on stderr after a second: a bar on a terminal, else a line every 5 s."""
+    return Progress(total, unit, 'fpc-design', show=progress)
 
 
 def run_chunks(function, chunks, weights=None, scheduler=None, progress=None, unit='design'):
@@ -54,7 +53,8 @@ def run_chunks(function, chunks, weights=None, scheduler=None, progress=None, un
         scheduler of an existing dask.distributed cluster (its workers must have
         fpc_gripper installed).
     progress : bool, optional
-        Show a progress bar (after a second); default: when stderr is a terminal.
+        False: no progress. Default: after a second, a bar on a terminal, a line every
+        few seconds otherwise (`fpc_gripper.progress.Progress`).
     unit : str
         Progress unit.
 

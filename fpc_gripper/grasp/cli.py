@@ -3,12 +3,14 @@
 import argparse
 import csv
 import math
-import pathlib
 import sys
 
 from fpc_gripper.io.config import load_gripper_config
 from fpc_gripper.io.mcap_writer import atomic_output
 from fpc_gripper.model.pipeline import ModelSettings
+from fpc_gripper.progress import Progress
+from fpc_gripper.ranges import RANGE_HELP
+from fpc_gripper.tools import add_version, JobFailed, OutputDir, run
 
 from .grasp import GraspSettings, pressure_range, simulate_grasp
 from .objects import make_object, OBJECTS
@@ -77,19 +79,30 @@ def plot_sweeps(sweeps, labels, path, title=''):
     plt.close(fig)
 
 
+_EPILOG = f"""\
+example:
+  fpc-grasp --object cylinder --diameter 0.040 --mu 0.5 --pressure 0:300e3:10e3 --out DIR
+
+{RANGE_HELP}"""
+
+
 def build_parser():
     """Return the argument parser of ``fpc-grasp``."""
     parser = argparse.ArgumentParser(
         prog='fpc-grasp', description='Grasp an object with the gripper over a range of grasp '
-        'pressures: grasp force, holding force along the palm axis, best pressure.')
+        'pressures: grasp force, holding force along the palm axis, best pressure.',
+        formatter_class=argparse.RawDescriptionHelpFormatter, epilog=_EPILOG)
     parser.add_argument('--object', required=True, choices=OBJECTS,
                         help='cylinder: coaxial with the palm axis; sphere: centred on it; '
                              'box: D x D section, lying across the palm')
     parser.add_argument('--diameter', required=True, type=float, help='object size D [m]')
     parser.add_argument('--mu', required=True, type=float, help='Coulomb coefficient [-]')
     parser.add_argument('--pressure', required=True,
-                        help='grasp pressures start:stop:step (or one value) [Pa gauge]')
+                        help='grasp pressures [Pa gauge]: a,b,c, start:stop:step or '
+                             'start:stop/count (see below)')
     parser.add_argument('--out', required=True, help='output directory (grasp.csv, grasp.png)')
+    parser.add_argument('--force', action='store_true',
+                        help='replace the outputs of an earlier run in --out')
     parser.add_argument('--height', type=float, default=0.0,
                         help="height of the object's lowest point above the palm [m] "
                              '(default 0: resting on it)')
@@ -102,7 +115,74 @@ def build_parser():
                         help='finger model tolerance [m] (sets the contact model)')
     parser.add_argument('--pull-step', type=float, default=GraspSettings().pull_step,
                         help='pull-out step [m]')
-    return parser
+    parser.add_argument('--no-progress', dest='progress', action='store_false', default=None,
+                        help='no progress on stderr (default: a bar on a terminal, a line '
+                             'every few seconds otherwise, once a run takes a second)')
+    return add_version(parser)
+
+
+def _prepare(args):
+    """Check every input and --out; return the job (the sweep and its files)."""
+    out = OutputDir(args.out, args.force).check()
+    pressures = pressure_range(args.pressure, '`pressure`')
+    if not (0.0 <= args.height < float('inf')):
+        raise ValueError(f'`height` must be >= 0 [m] (the object rests on or above the '
+                         f'palm), got {args.height}')
+    obj = make_object(args.object, args.diameter, args.height)
+    config = load_gripper_config(args.gripper_config)
+    settings = GraspSettings(open_pressure=args.open_pressure, pull_step=args.pull_step,
+                             model=ModelSettings(tolerance=args.tolerance))
+    open_pressure = config.max_pressure if args.open_pressure is None else args.open_pressure
+    if pressures.max() > open_pressure:
+        raise ValueError(f'`pressure` must be <= the open pressure {open_pressure:g} [Pa] '
+                         f'(--open-pressure, default the config max_pressure), got '
+                         f'{args.pressure!r}')
+    if not (args.mu >= 0.0 and math.isfinite(args.mu)):
+        raise ValueError(f'`mu` must be finite and >= 0 [-], got {args.mu}')
+
+    def job():
+        with Progress(len(config.fingers) + len(pressures), 'step', 'fpc-grasp',
+                      show=args.progress) as progress:
+            sweep = simulate_grasp(config, obj, pressures, args.mu, settings, progress)
+        best = sweep.best
+        usable = best is not None and math.isfinite(best.holding_force)
+        reason = None if usable else _why(sweep)
+        with out:
+            write_csv(sweep, out.file('grasp.csv'))
+            label = f'{args.object} D = {args.diameter * 1e3:g} mm'
+            plot_sweeps([sweep], [label], out.file('grasp.png'),
+                        title=f'{label}, mu = {args.mu:g}, open at '
+                              f'{sweep.open_pressure * 1e-3:.0f} kPa')
+            out.commit(failed=reason)
+        _print(sweep, out)
+        if reason is not None:
+            raise JobFailed(f'{reason}; {out.path} holds the failed rows and FAILED.txt')
+        return 0
+    return job
+
+
+def _why(sweep):
+    """Say why no grasp pressure gave a result: the first row's status and message."""
+    first = sweep.points[0]
+    return (f'no grasp pressure was simulated to the end ({first.status.name}: '
+            f'{first.message})')
+
+
+def _print(sweep, out):
+    print(f'{"pressure[kPa]":>13} {"grasp[N]":>9} {"holding[N]":>10} {"fingers":>7}  status')
+    for p in sweep.points:
+        print(f'{p.pressure * 1e-3:13.1f} {p.grasp_force:9.4f} {p.holding_force:10.4f} '
+              f'{p.fingers_in_contact:7d}  {p.status.name}')
+    best = sweep.best
+    if best is not None and math.isfinite(best.holding_force):
+        if best.holding_force <= 0.0:
+            print('no grasp pressure holds the object')
+        else:
+            print(f'best grasp pressure {best.pressure * 1e-3:.1f} kPa: holding force '
+                  f'{best.holding_force:.4f} N (grasp force {best.grasp_force:.4f} N)')
+    print(f'wrote {out.path / "grasp.csv"} and {out.path / "grasp.png"}')
+    if out.replaced:
+        print(out.replaced_note())
 
 
 def main(argv=None):
@@ -112,45 +192,11 @@ def main(argv=None):
     Returns
     -------
     int
-        0 when the sweep ran (rows say whether each grasp succeeded), 1 for bad input (a
-        message on stderr), 2 for bad usage.
+        The exit status of `fpc_gripper.tools.EXIT_CODES`: 1 when no grasp pressure was
+        simulated to the end.
 
     """
-    args = build_parser().parse_args(argv)
-    try:
-        out = pathlib.Path(args.out)
-        pressures = pressure_range(args.pressure)
-        obj = make_object(args.object, args.diameter, args.height)
-        config = load_gripper_config(args.gripper_config)
-        settings = GraspSettings(open_pressure=args.open_pressure, pull_step=args.pull_step,
-                                 model=ModelSettings(tolerance=args.tolerance))
-        out.mkdir(parents=True, exist_ok=True)
-        sweep = simulate_grasp(config, obj, pressures, args.mu, settings)
-        write_csv(sweep, out / 'grasp.csv')
-        label = f'{args.object} D = {args.diameter * 1e3:g} mm'
-        plot_sweeps([sweep], [label], out / 'grasp.png',
-                    title=f'{label}, mu = {args.mu:g}, open at '
-                          f'{sweep.open_pressure * 1e-3:.0f} kPa')
-    except (OSError, TypeError, ValueError) as error:
-        print(f'fpc-grasp: error: {error}', file=sys.stderr)
-        return 1
-    except KeyboardInterrupt:
-        print('fpc-grasp: interrupted', file=sys.stderr)
-        return 130
-    print(f'{"pressure[kPa]":>13} {"grasp[N]":>9} {"holding[N]":>10} {"fingers":>7}  status')
-    for p in sweep.points:
-        print(f'{p.pressure * 1e-3:13.1f} {p.grasp_force:9.4f} {p.holding_force:10.4f} '
-              f'{p.fingers_in_contact:7d}  {p.status.name}')
-    best = sweep.best
-    if best is None:
-        print('no grasp pressure was simulated to the end (see status)')
-    elif not math.isfinite(best.holding_force) or best.holding_force <= 0.0:
-        print('no grasp pressure holds the object')
-    else:
-        print(f'best grasp pressure {best.pressure * 1e-3:.1f} kPa: holding force '
-              f'{best.holding_force:.4f} N (grasp force {best.grasp_force:.4f} N)')
-    print(f'wrote {out / "grasp.csv"} and {out / "grasp.png"}')
-    return 0
+    return run(build_parser(), _prepare, argv)
 
 
 if __name__ == '__main__':

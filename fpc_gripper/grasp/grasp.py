@@ -11,6 +11,7 @@ from fpc_gripper.model.contact import contact_path, ContactSettings, translated
 from fpc_gripper.model.kernels import contact as ck
 from fpc_gripper.model.pipeline import contact_model, ModelSettings
 from fpc_gripper.model.validation import real_number
+from fpc_gripper.ranges import parse_range
 
 __all__ = ['GraspSettings', 'GraspStatus', 'GraspPoint', 'GraspSweep', 'simulate_grasp',
            'holding_force', 'pressure_range']
@@ -180,34 +181,21 @@ class GraspSweep:
         }
 
 
-def pressure_range(text):
+def pressure_range(text, name='`pressure`'):
     """
-    Parse 'start:stop:step' [Pa] (stop included when on the grid) or a single pressure.
+    Parse grasp pressures [Pa gauge]: a list, start:stop:step or start:stop/count.
+
+    The syntax of every tool (`fpc_gripper.ranges.parse_range`), pressures >= 0.
 
     Raises
     ------
     ValueError
-        Naming the text when it is malformed, not finite, negative or empty.
+        Naming `name` and the text when it is malformed, not finite, negative or empty.
 
     """
-    parts = str(text).split(':')
-    try:
-        values = [float(v) for v in parts]
-    except ValueError:
-        raise ValueError(f'`pressure` must be start:stop:step or one value [Pa], got '
-                         f'{text!r}') from None
-    if len(values) not in (1, 3) or not all(math.isfinite(v) for v in values):
-        raise ValueError(f'`pressure` must be start:stop:step or one value [Pa], got {text!r}')
-    if len(values) == 1:
-        pressures = np.array(values)
-    else:
-        start, stop, step = values
-        if step <= 0.0 or stop < start:
-            raise ValueError(f'`pressure` needs step > 0 and stop >= start [Pa], got {text!r}')
-        count = int(math.floor((stop - start) / step * (1 + 1e-12))) + 1
-        pressures = start + step * np.arange(count)
+    pressures = parse_range(text, name)
     if pressures.min() < 0.0:
-        raise ValueError(f'`pressure` must be >= 0 (gauge) [Pa], got {text!r}')
+        raise ValueError(f'{name} must be >= 0 (gauge) [Pa], got {text!r}')
     return pressures
 
 
@@ -329,7 +317,7 @@ def _sliding(result):
     return not np.any(result.pair_status[result.in_contact] == ck.STICK)
 
 
-def simulate_grasp(config, obj, pressures, mu, settings=GraspSettings()):
+def simulate_grasp(config, obj, pressures, mu, settings=GraspSettings(), progress=None):
     """
     Grasp an object with every finger of a gripper, at each of several grasp pressures.
 
@@ -350,6 +338,9 @@ def simulate_grasp(config, obj, pressures, mu, settings=GraspSettings()):
     mu : float
         Coulomb coefficient between fingers and object [-], >= 0.
     settings : GraspSettings
+    progress : callable, optional
+        ``progress(done, total)`` after every finger's release path and every grasp
+        pressure's pull-out.
 
     Returns
     -------
@@ -379,8 +370,11 @@ def simulate_grasp(config, obj, pressures, mu, settings=GraspSettings()):
     path = _release_path(open_pressure, pressures, settings.release_step)
     states = {}
     failure = {}
+    total = len(solvers) + len(pressures)
     for i, (section, solver) in enumerate(zip(sections, solvers)):
         results = contact_path(solver, path, section, mu=mu, settings=settings.contact)
+        if progress is not None:
+            progress(i + 1, total)
         if results and results[0].in_contact.any():
             failure[i] = (GraspStatus.DOES_NOT_FIT, {'finger': i, 'open': open_pressure})
             continue
@@ -418,4 +412,6 @@ def simulate_grasp(config, obj, pressures, mu, settings=GraspSettings()):
         detail.setdefault('u', 0.0)
         point.message = _MESSAGES[point.status].format(**detail)
         points.append(point)
+        if progress is not None:
+            progress(len(solvers) + len(points), total)
     return GraspSweep(points, obj, mu, open_pressure)

@@ -10,8 +10,9 @@ import pathlib
 import re
 import shutil
 import sys
-import time
 
+from fpc_gripper.progress import Progress
+from fpc_gripper.tools import add_version, EXIT_SKIPPED, InputError, OutputDir, run
 from .mcap_reader import McapInputError, Recording, recover, UnknownTopicError
 from .mcap_writer import atomic_mcap_writer, SchemaNotFoundError
 from .messages import (curvature_message, DEFAULT_ATMOSPHERIC_PRESSURE, finger_topic,
@@ -298,19 +299,6 @@ def _select_inputs(mcap_file, source):
     return chosen
 
 
-def _progress_printer(stream, every_s=1.0):
-    state = {'last': time.monotonic()}
-
-    def show(done, total, final=False):
-        now = time.monotonic()
-        if final or now - state['last'] >= every_s:
-            state['last'] = now
-            percent = 100.0 * done / total if total else 100.0
-            print(f'replay-model: {done}/{total} inputs ({percent:.0f} %)', file=stream,
-                  flush=True)
-    return show
-
-
 def replay_model(in_path, out_path, *, config=None, settings=None, source='auto',
                  rigidity=True, rigidity_period=0.0, stale_after_s=None, frame_prefix='',
                  copy_inputs=False, compression='zstd', overwrite=False, progress=None,
@@ -507,14 +495,24 @@ def _model_settings(args):
 
 
 _IN_HELP = 'MCAP file, or rosbag2 bag directory (metadata.yaml and split .mcap files)'
+_FORCE_HELP = 'replace the outputs of an earlier run'
+_EXAMPLES = """\
+examples, on the recordings in examples/recording/ (any recording of mcap_recorder or
+`ros2 bag record -s mcap` alike):
+  fpc-mcap info examples/recording/run.mcap
+  fpc-mcap plot examples/recording/run.mcap plots/ --times 0,1.5,3
+  fpc-mcap export-csv examples/recording/run.mcap csv/
+  fpc-mcap replay-model examples/recording/run.mcap modelled.mcap
+  fpc-mcap recover examples/recording/crashed.mcap fixed.mcap"""
 
 
 def build_parser():
     """Build the argparse parser of ``fpc-mcap``."""
     parser = argparse.ArgumentParser(
-        prog='fpc-mcap',
+        prog='fpc-mcap', formatter_class=argparse.RawDescriptionHelpFormatter,
         description='Inspect, plot, export, recover and replay fpc_gripper MCAP recordings '
-                    '(rosbag2 form: profile ros2, cdr messages, ros2msg schemas).')
+                    '(rosbag2 form: profile ros2, cdr messages, ros2msg schemas).',
+        epilog=_EXAMPLES)
     sub = parser.add_subparsers(dest='command', required=True, metavar='COMMAND')
 
     p = sub.add_parser('info', help='topics, message counts, duration and rates',
@@ -538,6 +536,7 @@ def build_parser():
     p.add_argument('--dpi', type=int, default=100, help='resolution [px/inch] (default 100)')
     p.add_argument('--atmospheric-pressure', type=float, default=DEFAULT_ATMOSPHERIC_PRESSURE,
                    help='subtracted from absolute pressure readings [Pa] (default 101325)')
+    p.add_argument('--force', action='store_true', help=_FORCE_HELP + ' in OUTDIR')
 
     p = sub.add_parser('export-csv', help='one CSV per topic',
                        description='Write one CSV per topic into OUTDIR: log and publish '
@@ -547,6 +546,7 @@ def build_parser():
                    help='output directory (created if missing)')
     p.add_argument('--topics', nargs='+', default=None, metavar='TOPIC',
                    help='topics to export (default: all)')
+    p.add_argument('--force', action='store_true', help=_FORCE_HELP + ' in OUTDIR')
 
     p = sub.add_parser('recover', help='rebuild a truncated file (e.g. after kill -9)',
                        description='Copy every readable message of a truncated or damaged '
@@ -559,8 +559,10 @@ def build_parser():
                    help='chunk compression of OUT (default zstd)')
     p.add_argument('--force', action='store_true', help='replace OUT if it exists')
 
-    p = sub.add_parser('replay-model', help='run the CCM model on recorded pressures',
-                       description='Solve the CCM model for every recorded finger_<i>/pressure '
+    p = sub.add_parser('replay-model', help="run model_node's finger model on recorded inputs",
+                       description="Solve model_node's finger model (by default the adaptive "
+                                   'model, the PCC rod model within 0.05 mm; --tolerance 0: '
+                                   'the paper CCM) for every recorded finger_<i>/pressure '
                                    '(or pressure_command) and tip_force message, warm-started, '
                                    'and write finger_<i>/shape, curvature and rigidity to OUT.')
     p.add_argument('input', type=pathlib.Path, metavar='IN', help=_IN_HELP)
@@ -601,11 +603,15 @@ def build_parser():
                    help='chunk compression of OUT (default zstd)')
     p.add_argument('--force', action='store_true', help='replace OUT if it exists')
     p.add_argument('--quiet', action='store_true', help='no progress on stderr')
+    for sub_parser in [parser, *sub.choices.values()]:
+        add_version(sub_parser)
     return parser
 
 
 def _run(args, out, err):
     skipped = []
+    if args.command in ('recover', 'replay-model') and args.output.exists() and not args.force:
+        raise InputError(f'{args.output}: exists; pass --force to replace it')
     if args.command == 'info':
         with Recording(args.input) as f:
             info = file_info(f)
@@ -615,31 +621,28 @@ def _run(args, out, err):
             _print_info(info, out)
     elif args.command == 'plot':
         from .plots import make_plots
-        if args.output.exists() and not args.output.is_dir():
-            raise McapInputError(f'{args.output}: exists and is not a directory')
-        with Recording(args.input, skip_undecodable=True) as f:
-            created = not args.output.exists()
-            args.output.mkdir(parents=True, exist_ok=True)
-            try:
-                written = make_plots(f, args.output, times=args.times, size=args.size,
-                                     dpi=args.dpi,
-                                     atmospheric_pressure=args.atmospheric_pressure)
-            except BaseException:
-                if created:
-                    shutil.rmtree(args.output, ignore_errors=True)
-                raise
+        target = OutputDir(args.output, args.force, 'OUTDIR')
+        with Recording(args.input, skip_undecodable=True) as f, target, \
+                Progress(1, 'recording', 'fpc-mcap plot', stream=err):
+            written = make_plots(f, target.tmp, times=args.times, size=args.size,
+                                 dpi=args.dpi, atmospheric_pressure=args.atmospheric_pressure)
+            target.commit()
             skipped = f.undecodable
         for path in written:
-            print(path, file=out)
+            print(target.final(path), file=out)
     elif args.command == 'export-csv':
-        with Recording(args.input, skip_undecodable=True) as f:
-            written = export_csv(f, args.output, topics=args.topics)
+        target = OutputDir(args.output, args.force, 'OUTDIR')
+        with Recording(args.input, skip_undecodable=True) as f, target, \
+                Progress(1, 'recording', 'fpc-mcap export-csv', stream=err):
+            written = export_csv(f, target.tmp, topics=args.topics)
+            target.commit()
             skipped = f.undecodable
         for path in written.values():
-            print(path, file=out)
+            print(target.final(path), file=out)
     elif args.command == 'recover':
-        report = recover(args.input, args.output, compression=args.compression,
-                         overwrite=args.force)
+        with Progress(1, 'recording', 'fpc-mcap recover', stream=err):
+            report = recover(args.input, args.output, compression=args.compression,
+                             overwrite=args.force)
         if not report.complete:
             state = f'cut off or damaged ({report.dropped_bytes} bytes unreadable)'
         elif report.indexed_chunks:
@@ -655,14 +658,18 @@ def _run(args, out, err):
               f'{report.skipped_messages} messages without schema skipped -> {args.output}',
               file=out)
     elif args.command == 'replay-model':
-        progress = None if args.quiet else _progress_printer(err)
         settings = _model_settings(args)
-        report = replay_model(args.input, args.output, config=args.config, settings=settings,
-                              source=args.source, rigidity=not args.no_rigidity,
-                              rigidity_period=args.rigidity_period,
-                              stale_after_s=args.stale_after, frame_prefix=args.frame_prefix,
-                              copy_inputs=args.copy_inputs, compression=args.compression,
-                              overwrite=args.force, progress=progress, skip_undecodable=True)
+        with Progress(0, 'input', 'fpc-mcap replay-model', show=not args.quiet,
+                      stream=err) as progress:
+            report = replay_model(args.input, args.output, config=args.config,
+                                  settings=settings, source=args.source,
+                                  rigidity=not args.no_rigidity,
+                                  rigidity_period=args.rigidity_period,
+                                  stale_after_s=args.stale_after,
+                                  frame_prefix=args.frame_prefix,
+                                  copy_inputs=args.copy_inputs, compression=args.compression,
+                                  overwrite=args.force, progress=progress,
+                                  skip_undecodable=True)
         skipped = report.undecodable
         print(f'replayed {report.inputs} inputs of {", ".join(report.fingers)}: '
               f'{report.solves} solves, {report.failures} not converged, '
@@ -677,6 +684,7 @@ _NAMED_SKIPS = 20
 
 def _report_skipped(command, skipped, err):
     """Name the messages a command skipped as undecodable; its exit code (0, or 3)."""
+    # EXIT_SKIPPED: the job was done, but not on every input message.
     if not skipped:
         return 0
     print(f'fpc-mcap {command}: warning: skipped {len(skipped)} undecodable '
@@ -685,7 +693,7 @@ def _report_skipped(command, skipped, err):
         print(f'  {bad}', file=err)
     if len(skipped) > _NAMED_SKIPS:
         print(f'  ... and {len(skipped) - _NAMED_SKIPS} more', file=err)
-    return 3
+    return EXIT_SKIPPED
 
 
 def main(argv=None):
@@ -700,21 +708,16 @@ def main(argv=None):
     Returns
     -------
     int
-        0 on success, 1 for bad input (a message on stderr), 2 for bad usage, 3 when
-        ``plot``, ``export-csv`` or ``replay-model`` finished but skipped messages whose
-        payload could not be decoded (each named on stderr, by topic and log time).
+        The exit status of `fpc_gripper.tools.EXIT_CODES`: 2 for a missing, empty,
+        damaged or wrong input (one line names it) and for bad values, 3 when ``plot``,
+        ``export-csv`` or ``replay-model`` finished but skipped messages whose payload
+        could not be decoded (each named on stderr, by topic and log time).
 
     """
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    try:
-        return _run(args, sys.stdout, sys.stderr)
-    except (McapInputError, SchemaNotFoundError, OSError, ValueError) as error:
-        print(f'fpc-mcap {args.command}: error: {error}', file=sys.stderr)
-        return 1
-    except KeyboardInterrupt:
-        print(f'fpc-mcap {args.command}: interrupted', file=sys.stderr)
-        return 130
+    def prepare(args):
+        return lambda: _run(args, sys.stdout, sys.stderr)
+    return run(build_parser(), prepare, argv,
+               input_errors=(McapInputError, SchemaNotFoundError, ValueError, TypeError))
 
 
 if __name__ == '__main__':

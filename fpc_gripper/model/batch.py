@@ -11,6 +11,7 @@ from .discretisations.ccm import AXES, check_rigidity, rigidity_result, SolverSt
 from .pipeline import finger_model, ModelSettings, rung_label, solver_label
 from .result import Result
 from .selection import AdaptiveSolver
+from .stiffness import checked_rigidity, classify, direct_stiffness, RigidityStatus
 from .validation import check_load, check_outputs, OUTPUT_LEVELS
 
 __all__ = ['solve_grid', 'rigidity_grid', 'check_pressures', 'GRID_FIELDS',
@@ -34,7 +35,10 @@ RIGIDITY_GRID_FIELDS = {
     'designs': 'list of ActuatorDesign', 'pressures': '(P,) [Pa]', 'axis': "'x' or 'z'",
     'displacement': '[m]', 'shape': '(D, P)', 'value': 'K_x or K_z [N m^2]; NaN where not found',
     'force': 'end load that produces the displacement [N]',
-    'lever': 'lever arm in the loaded state [m]', 'success': 'bool',
+    'lever': 'lever arm in the loaded state [m]',
+    'success': 'bool: found, and eq. 22 applies (`rigidity_status` OK)',
+    'rigidity_status': '`stiffness.RigidityStatus` codes (small lever, branch change)',
+    'direct_stiffness': 'dF/d delta of the displacement-control path [N/m]',
     'iterations': 'unloaded plus bordered Newton iterations', 'models': 'str',
     'result': 'function (d, p) -> the rigidity Result of one scene, as its single call '
               'returns it',
@@ -367,6 +371,8 @@ class _RigidityGrid:
         self.force = np.full(count, np.nan)
         self.lever = np.full(count, np.nan)
         self.success = np.zeros(count, dtype=bool)
+        self.rigidity_status = np.full(count, int(RigidityStatus.FAILED), dtype=np.int64)
+        self.direct_stiffness = np.full(count, np.nan)
         self.iterations = np.zeros(count, dtype=np.int64)
         self.models = np.empty(count, dtype=object)
         self.scenes = [None] * count
@@ -379,7 +385,8 @@ class _RigidityGrid:
     def finish(self):
         """Return the Result (`RIGIDITY_GRID_FIELDS`)."""
         fields = {name: getattr(self, name).reshape(self.shape) for name in (
-            'value', 'force', 'lever', 'success', 'iterations', 'models')}
+            'value', 'force', 'lever', 'success', 'rigidity_status', 'direct_stiffness',
+            'iterations', 'models')}
         return Result.of(dict(fields, designs=self.designs, pressures=self.pressures,
                               axis=self.axis, displacement=self.displacement, shape=self.shape,
                               result=self.scene_result))
@@ -428,8 +435,8 @@ def rigidity_grid(designs, pressures, axis='x', displacement=0.010, settings=Mod
             if _compiled(solver):
                 blocks.setdefault(id(solver), (solver, []))[1].append(scene)
             else:
-                _store_rigidity(out, scene, solver.rigidity(pressure, axis, delta), choice,
-                                solver)
+                _store_rigidity(out, scene, checked_rigidity(
+                    solver, solver.rigidity(pressure, axis, delta)), choice, solver)
         for solver, block in blocks.values():
             groups.add(solver, False, block)
     k = 0 if axis == 'x' else 1
@@ -447,10 +454,14 @@ def rigidity_grid(designs, pressures, axis='x', displacement=0.010, settings=Mod
             out.scenes[scene] = functools.partial(_rigidity_scene, solver, axis, delta, p,
                                                   batch, j)
             if found[j]:
-                out.success[scene] = True
+                status = classify(True, lever[j], delta, not batch.stable[j])
+                out.rigidity_status[scene] = int(status)
+                out.success[scene] = status is RigidityStatus.OK
                 out.force[scene] = batch.force[j]
                 out.lever[scene] = lever[j]
                 out.value[scene] = flexural_rigidity(batch.force[j], lever[j], delta)
+                out.direct_stiffness[scene] = direct_stiffness(solver, batch.states[j], p,
+                                                               batch.force[j], axis)
     return out.finish()
 
 
@@ -461,6 +472,8 @@ def _label(solver, choice):
 
 def _store_rigidity(out, scene, result, choice, solver):
     out.success[scene] = result.success
+    out.rigidity_status[scene] = int(result.rigidity_status)
+    out.direct_stiffness[scene] = result.direct_stiffness
     out.value[scene], out.force[scene], out.lever[scene] = result.value, result.force, \
         result.lever
     out.iterations[scene] = result.iterations
@@ -480,7 +493,8 @@ def _rigidity_scene(solver, axis, delta, pressure, batch, j):
     if unloaded.status is not SolverStatus.SUCCESS:
         out = engine.BorderedOutcome(unloaded.x, np.nan, False, 0, 0.0, False, np.nan,
                                      np.full(2, np.nan), unloaded)
-        return rigidity_result(solver, axis, delta, pressure, out, engine.TIP)
+        return checked_rigidity(solver, rigidity_result(solver, axis, delta, pressure, out,
+                                                        engine.TIP))
     found = bool(np.isfinite(batch.force[j]))
     force = batch.force[j] * AXES[axis] if found else np.zeros(2)
     fields = engine.outputs(problem, batch.states[j:j + 1], [pressure],
@@ -489,4 +503,5 @@ def _rigidity_scene(solver, axis, delta, pressure, batch, j):
                                  int(batch.iterations[j]), float(batch.fraction[j]),
                                  bool(batch.stable[j]), float(batch.gradient[j]), batch.tips[j],
                                  unloaded, fields)
-    return rigidity_result(solver, axis, delta, pressure, out, engine.TIP)
+    return checked_rigidity(solver, rigidity_result(solver, axis, delta, pressure, out,
+                                                    engine.TIP))

@@ -20,6 +20,7 @@ from .discretisations.rod import RodSolver
 from .reference import CONTINUUM_FLOOR, rod_tolerance
 from .section.law import station_layout
 from .section.segments import uniform_edges
+from .stiffness import checked_rigidity
 from .validation import check_load, check_pressure_model, real_number
 
 __all__ = ['Scene', 'ModelChoice', 'RUNGS', 'choose_model', 'load_error_model', 'make_solver',
@@ -618,8 +619,15 @@ class AdaptiveSolver:
 
     def rigidity(self, pressure=0.0, axis='x', displacement=0.010, initial=None, *,
                  outputs='tip'):
-        """Flexural rigidity with the model the unloaded scene needs; see `CCMSolver`."""
+        """
+        Flexural rigidity with the model the unloaded scene needs; see `CCMSolver`.
+
+        Checked where eq. 22 breaks (`stiffness.checked_rigidity`): a lever shorter than
+        the displacement or a loaded state off the unloaded branch has its own
+        `rigidity_status` and ``success=False``; `direct_stiffness` is dF/d delta.
+        """
         choice = self.choose(pressure, (0.0, 0.0))
         solver = self.solver_for(choice.rung, choice.n_segments)
-        return solver.rigidity(pressure, axis, displacement,
-                               initial=self._warm(solver, initial), outputs=outputs)
+        return checked_rigidity(solver, solver.rigidity(
+            pressure, axis, displacement, initial=self._warm(solver, initial),
+            outputs=outputs))

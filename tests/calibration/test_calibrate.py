@@ -4,6 +4,7 @@ import dataclasses
 import json
 import math
 import pathlib
+import shutil
 import subprocess
 import sys
 import threading
@@ -349,3 +350,38 @@ def test_markers_from_an_mcap_recording_calibrate_as_the_csv(case, tmp_path):
                                                           rel=1e-6)
     assert main(['--design', str(base), '--markers', str(recording), '--out',
                  str(tmp_path / 'x')]) == 2
+
+
+def test_a_failed_fit_over_an_earlier_success_leaves_nothing_that_looks_deployable(
+        case, tmp_path, capsys):
+    out = tmp_path / 'calibrated'
+    shutil.copytree(case['out'], out)
+    assert (out / 'actuator.yaml').is_file() and (out / 'gripper.yaml').is_file()
+    argv = ['--design', str(tmp_path / 'base.yaml'), '--markers', str(case['markers']),
+            '--loading', str(case['loading']), '--fit', ','.join(FIT), '--out', str(out)]
+    BASE.to_yaml(tmp_path / 'base.yaml')
+    # Without --force the earlier success is refused, before any fit.
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.count('\n') == 1 and '--force' in err
+    assert (out / 'actuator.yaml').is_file()
+    # Two evaluations cannot converge: the fit fails.
+    assert main(argv + ['--force', '--max-evaluations', '2']) == 1
+    captured = capsys.readouterr()
+    assert 'MAX_EVALUATIONS' in captured.err and 'Traceback' not in captured.err
+    assert 'replaced the earlier outputs' in captured.out
+    names = sorted(p.name for p in out.iterdir())
+    assert names == ['.fpc_gripper_output', 'FAILED.txt', 'report.json', 'report.png']
+    assert json.loads((out / 'report.json').read_text())['success'] is False
+    assert sorted(p.name for p in tmp_path.iterdir()) == ['base.yaml', 'calibrated']
+
+
+def test_an_existing_file_as_out_is_bad_input_before_the_fit(case, tmp_path, capsys):
+    target = tmp_path / 'taken'
+    target.write_text('not a directory')
+    status = main(['--design', str(case['out'] / 'actuator.yaml'), '--markers',
+                   str(case['markers']), '--out', str(target)])
+    err = capsys.readouterr().err
+    assert status == 2 and err.count('\n') == 1
+    assert err.startswith('fpc-calibrate: error: --out') and 'not a directory' in err
+    assert target.read_text() == 'not a directory'

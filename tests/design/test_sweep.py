@@ -56,7 +56,11 @@ def _flattening(frame, field):
 
 def test_every_row_solved(prestrains, rigidity):
     assert (prestrains['status'] == 'ok').all() and prestrains['success'].all()
-    assert (rigidity['status'] == 'ok').all()
+    # +10 mm along X at 0.15 and 80 kPa pulls a nearly flat finger: a lever under 10 mm.
+    flagged = rigidity[rigidity['status'] != 'ok']
+    assert set(flagged['status']) <= {'small_lever'}
+    assert (flagged['prestrain'] == 0.15).all() and (flagged['pressure_pa'] >= 60e3).all()
+    assert np.isfinite(rigidity[['kx_nm2', 'kx_direct_n_per_m']].to_numpy()).all()
     assert len(prestrains) == len(PRESTRAINS) * PRESSURES.size
 
 
@@ -193,10 +197,11 @@ def test_bad_input_names_the_argument(kwargs, match):
 
 def test_parse_values():
     np.testing.assert_allclose(parse_values('0:400e3:5e3'), np.arange(81) * 5e3)
-    np.testing.assert_allclose(parse_values('16e-3:30e-3:8'), np.linspace(0.016, 0.030, 8))
+    np.testing.assert_allclose(parse_values('16e-3:30e-3/8'), np.linspace(0.016, 0.030, 8))
     np.testing.assert_allclose(parse_values('0.15, 0.25,0.4'), [0.15, 0.25, 0.4])
     assert parse_assignment('Cy=0.02,0.03')[0] == 'Cy'
-    for bad in ('0:1', '0:1:0', '0:1:-2.0', '1,nan', '0:1:2000000', 'a,b', ''):
+    for bad in ('0:1', '0:1:0', '0:1:-2.0', '1,nan', '0:1:2000000', 'a,b', '', '16e-3:30e-3:8',
+                '0:1/0', '0:1/2.5', '0:1:1e-7'):
         with pytest.raises(ValueError):
             parse_values(bad)
     with pytest.raises(ValueError, match='FIELD=VALUES'):

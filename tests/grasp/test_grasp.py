@@ -2,6 +2,7 @@
 
 import csv
 import math
+import re
 
 import numpy as np
 import pytest
@@ -147,14 +148,30 @@ def test_cli_writes_the_columns_and_the_chart(tmp_path, capsys):
 @pytest.mark.parametrize('args, word', [
     (['--diameter', '-0.04'], 'diameter'), (['--pressure', '0:1e3'], 'pressure'),
     (['--pressure', 'abc'], 'pressure'), (['--height', '-0.01'], 'palm'),
+    (['--pressure', '0:300e3:10'], 'write 0:300e3/10 for 10 values, or 0:300e3:10.0'),
+    (['--pressure', '0:5e6:1e5'], 'open pressure'),
 ])
-def test_cli_bad_input_exits_1_with_a_message(tmp_path, capsys, args, word):
+def test_cli_bad_input_exits_2_with_one_line(tmp_path, capsys, args, word):
     base = {'--object': 'sphere', '--diameter': '0.05', '--mu': '0.5', '--pressure': '0',
             '--out': str(tmp_path / 'x')}
     for key, value in zip(args[::2], args[1::2]):
         base[key] = value
     argv = [item for pair in base.items() for item in pair]
-    assert main(argv) == 1
+    assert main(argv) == 2
     err = capsys.readouterr().err
     assert err.startswith('fpc-grasp: error:') and word in err
-    assert not (tmp_path / 'x' / 'grasp.csv').exists()
+    assert len(err.strip().splitlines()) == 1
+    assert not (tmp_path / 'x').exists()
+
+
+def test_cli_a_sweep_with_no_usable_row_exits_1_and_says_why(tmp_path, capsys):
+    out = tmp_path / 'g'
+    code = main(['--object', 'cylinder', '--diameter', '5', '--mu', '0.5', '--pressure', '0',
+                 '--out', str(out)])
+    captured = capsys.readouterr()
+    assert code == 1
+    # Progress lines may come first on a slow machine; the failure is one line.
+    lines = [line for line in captured.err.strip().splitlines()
+             if not re.match(r'fpc-grasp: \d+/\d+ steps', line)]
+    assert len(lines) == 1 and lines[0].startswith('fpc-grasp: failed: no grasp pressure')
+    assert (out / 'FAILED.txt').is_file() and (out / 'grasp.csv').is_file()

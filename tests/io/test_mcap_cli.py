@@ -15,6 +15,7 @@ from rclpy.serialization import serialize_message
 from fpc_gripper.io.cli import main
 from fpc_gripper.io.mcap_reader import McapFile
 from fpc_gripper.io.mcap_writer import Rosbag2McapWriter
+from fpc_gripper.tools import OUTPUT_MARKER
 
 
 @pytest.fixture(scope='module')
@@ -62,8 +63,8 @@ def test_export_csv_flattens_fields(capsys, recording, tmp_path):
     code, _, err = run(capsys, 'export-csv', recording, out_dir, '--topics',
                        '/finger_0/pressure', '/finger_1/shape')
     assert code == 0, err
-    assert sorted(p.name for p in out_dir.iterdir()) == ['finger_0__pressure.csv',
-                                                         'finger_1__shape.csv']
+    names = sorted(p.name for p in out_dir.iterdir() if p.name[0] != '.')
+    assert names == ['finger_0__pressure.csv', 'finger_1__shape.csv']
     with open(out_dir / 'finger_0__pressure.csv', newline='') as handle:
         rows = list(csv.DictReader(handle))
     assert len(rows) == 40
@@ -83,7 +84,7 @@ def test_plot_writes_pngs_of_the_requested_size(capsys, recording, tmp_path, siz
     code, out, err = run(capsys, 'plot', recording, out_dir, '--times', '0,0.5,1.9',
                          '--size', f'{size[0]}x{size[1]}')
     assert code == 0, err
-    names = sorted(p.name for p in out_dir.iterdir())
+    names = sorted(p.name for p in out_dir.iterdir() if p.name[0] != '.')
     assert names == ['curvature.png', 'pressure.png', 'shapes.png']
     for name in names:
         image = matplotlib.image.imread(out_dir / name)
@@ -134,9 +135,9 @@ REASONS = {'truncated': 'truncated', 'corrupt': 'damaged', 'not_mcap': 'not an M
 def _commands(bad, out):
     return {
         'info': ['info', bad],
-        'plot': ['plot', bad, out],
-        'export-csv': ['export-csv', bad, out],
-        # --force: even allowed to replace it, a failed replay leaves the old output.
+        # --force: even allowed to replace them, a failed run leaves the old outputs.
+        'plot': ['plot', bad, out, '--force'],
+        'export-csv': ['export-csv', bad, out, '--force'],
         'replay-model': ['replay-model', bad, out / 'replayed.mcap', '--quiet', '--force'],
     }
 
@@ -153,9 +154,10 @@ def test_bad_input_fails_cleanly(capsys, recording, tmp_path, kind, command):
     sentinel = out / 'replayed.mcap'
     sentinel.write_bytes(b'previous output')
     (out / 'curvature.png').write_bytes(b'previous plot')
+    (out / OUTPUT_MARKER).write_text('an earlier run')
     before = sorted(p.name for p in tmp_path.rglob('*'))
     code, _, err = run(capsys, *_commands(bad, out)[command])
-    assert code == 1
+    assert code == 2
     assert f'fpc-mcap {command}: error:' in err and 'Traceback' not in err
     assert REASONS[kind] in err
     assert sorted(p.name for p in tmp_path.rglob('*')) == before   # no temp files left
@@ -180,7 +182,7 @@ def test_unknown_topics_and_bad_options_fail_cleanly(capsys, recording, tmp_path
     out = tmp_path / 'out'
     argv = [a.format(rec=recording, out=out, missing=tmp_path / 'missing.yaml') for a in argv]
     code, _, err = run(capsys, *argv)
-    assert code == 1 and 'error:' in err
+    assert code == 2 and 'error:' in err
     assert not out.exists()
 
 
@@ -212,7 +214,7 @@ def test_recover_skips_a_damaged_chunk(capsys, recording, tmp_path):
 def test_recover_rejects_a_non_mcap_file(capsys, recording, tmp_path):
     bad = _not_mcap(recording, tmp_path / 'junk.mcap')
     code, _, err = run(capsys, 'recover', bad, tmp_path / 'out.mcap')
-    assert code == 1 and 'not an MCAP file' in err
+    assert code == 2 and 'not an MCAP file' in err
     assert not (tmp_path / 'out.mcap').exists()
 
 
@@ -256,7 +258,7 @@ def test_every_command_reads_a_bag_directory_as_the_single_file(
         assert (tmp_path / 'split' / csv_file.name).read_text() == csv_file.read_text()
     code, _, err = run(capsys, 'plot', bag_directory, tmp_path / 'plots')
     assert code == 0, err
-    assert sorted(p.name for p in (tmp_path / 'plots').iterdir()) == [
+    assert sorted(p.name for p in (tmp_path / 'plots').iterdir() if p.name[0] != '.') == [
         'curvature.png', 'pressure.png', 'shapes.png']
     code, out, err = run(capsys, 'recover', bag_directory, tmp_path / 'joined.mcap')
     assert code == 0, err
@@ -288,7 +290,7 @@ def test_recover_refuses_an_existing_output_unless_forced(capsys, recording, tmp
     out = tmp_path / 'fixed.mcap'
     out.write_bytes(b'precious')
     code, _, err = run(capsys, 'recover', bad, out)
-    assert code == 1 and 'exists' in err and '--force' in err
+    assert code == 2 and 'exists' in err and '--force' in err
     assert out.read_bytes() == b'precious'
     assert sorted(p.name for p in tmp_path.iterdir()) == ['cut.mcap', 'fixed.mcap']
     code, _, err = run(capsys, 'recover', bad, out, '--force')

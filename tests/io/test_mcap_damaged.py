@@ -80,7 +80,7 @@ def test_a_zstd_error_is_one_line_naming_the_file(capsys, flipped, tmp_path, com
     before = sorted(p.name for p in tmp_path.rglob('*'))
     argv = [command, bad] + ([tmp_path / 'csv'] if command == 'export-csv' else [])
     code, _, err = run(capsys, *argv)
-    assert code == 1
+    assert code == 2
     assert_clean_error(err, command, bad, tmp_path, before)
     assert 'ZstdError' in err and 'fpc-mcap recover' in err
 
@@ -107,7 +107,7 @@ def test_recover_refuses_when_nothing_is_recoverable(capsys, tmp_path, fraction)
     bad.write_bytes(data[:max(8, int(len(data) * fraction))])
     before = sorted(p.name for p in tmp_path.rglob('*'))
     code, _, err = run(capsys, 'recover', bad, tmp_path / 'fixed.mcap')
-    assert code == 1
+    assert code == 2
     assert_clean_error(err, 'recover', bad, tmp_path, before)
     assert 'nothing recoverable' in err and 'cut off' in err
 

@@ -9,6 +9,7 @@ from fpc_gripper.model.batch import GRID_FIELDS, rigidity_grid, RIGIDITY_GRID_FI
 from fpc_gripper.model.contact import Circle, CONTACT_FIELDS, solve_contact
 from fpc_gripper.model.discretisations.ccm import RIGIDITY_FIELDS
 from fpc_gripper.model.pipeline import contact_model, finger_model
+from fpc_gripper.model.stiffness import RIGIDITY_CHECK_FIELDS
 
 DESIGN = ActuatorDesign.paper(0.25)
 RUNGS = {
@@ -122,7 +123,7 @@ def test_grid_and_contact_results():
     assert set(grid.result(0, 1).keys()) == set(FINGER_FIELDS)
     k = rigidity_grid(DESIGN, [0.0])
     assert set(k.keys()) == set(RIGIDITY_GRID_FIELDS)
-    assert set(k.result(0, 0).keys()) == set(RIGIDITY_FIELDS)
+    assert set(k.result(0, 0).keys()) == set(RIGIDITY_FIELDS) | set(RIGIDITY_CHECK_FIELDS)
     contact = solve_contact(contact_model(DESIGN), 1e5, [Circle((0.04, -0.06), 0.02)])
     assert set(contact.keys()) == set(CONTACT_FIELDS) | {'success', 'status', 'message',
                                                          'iterations'}
