@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# Regenerate requirements.lock from requirements.in in a throwaway venv and show what changed.
+# Regenerate requirements.lock from requirements.in (and requirements-nodeps.in, installed
+# without dependencies) in a throwaway venv and show what changed.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 python="${PYTHON:-python3}"
@@ -7,6 +8,7 @@ work="$(mktemp -d)"
 trap 'rm -rf "$work"' EXIT
 "$python" -m venv "$work/venv"
 "$work/venv/bin/pip" install -q --disable-pip-version-check -r requirements.in
+"$work/venv/bin/pip" install -q --disable-pip-version-check --no-deps -r requirements-nodeps.in
 "$work/venv/bin/pip" check
 {
   echo '# Every distribution scripts/setup.sh installs, at its exact version. Generated: do not'
