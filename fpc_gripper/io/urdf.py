@@ -120,10 +120,12 @@ def _write_atomically(path, text):
 
 
 def main(argv=None):
-    """Write the URDF (to stdout by default); exit 0, or 1 on a bad config or output."""
+    """Write the URDF (to stdout by default); exit as the tools do (0, 1 or 2)."""
     parser = argparse.ArgumentParser(
         prog='python -m fpc_gripper.io.urdf',
-        description="Generate the gripper's URDF from its YAML.")
+        description="Generate the gripper's URDF from its YAML.",
+        epilog='exit status: 0 written; 1 the output could not be written (nothing left '
+               'half written); 2 bad usage or an unreadable or invalid gripper config')
     parser.add_argument('--gripper-config', help='gripper YAML (default: the shipped '
                         'msg_configs/gripper_paper.yaml)')
     parser.add_argument('--prefix', default='', help='frame prefix, e.g. left/')
@@ -131,12 +133,16 @@ def main(argv=None):
     args = parser.parse_args(argv)
     try:
         text = gripper_urdf(load_gripper_config(args.gripper_config), args.prefix)
+    except (OSError, ValueError) as exc:
+        print(f'{parser.prog}: error: --gripper-config: {exc}', file=sys.stderr)
+        return 2
+    try:
         if args.out:
             _write_atomically(args.out, text)
         else:
             sys.stdout.write(text)
-    except (OSError, ValueError) as exc:
-        print(f'fpc_gripper.io.urdf: {exc}', file=sys.stderr)
+    except OSError as exc:
+        print(f'{parser.prog}: failed: --out: {exc}', file=sys.stderr)
         return 1
     return 0
 

@@ -64,13 +64,19 @@ def test_the_prefix_reaches_every_frame(tmp_path):
     assert robot.base_link == 'left/palm'
 
 
-def test_a_bad_config_exits_1_naming_it_and_writes_nothing(tmp_path, capsys):
+def test_a_bad_config_exits_2_naming_it_and_writes_nothing(tmp_path, capsys):
     out = tmp_path / 'x.urdf'
     bad = tmp_path / 'bad.yaml'
     bad.write_text('palm_radius: -1\nfingers:\n  - name: f\n')
-    assert main(['--gripper-config', str(bad), '--out', str(out)]) == 1
-    assert 'palm_radius' in capsys.readouterr().err
+    assert main(['--gripper-config', str(bad), '--out', str(out)]) == 2
+    err = capsys.readouterr().err
+    assert 'palm_radius' in err and len(err.strip().splitlines()) == 1
     assert not out.exists() and not list(tmp_path.glob('.x.urdf*'))
+
+
+def test_an_unwritable_output_exits_1(tmp_path, capsys):
+    assert main(['--out', str(tmp_path / 'missing' / 'x.urdf')]) == 1
+    assert '--out' in capsys.readouterr().err
 
 
 @pytest.mark.parametrize('angle', [0.3, -2.5, math.pi])
