@@ -10,13 +10,12 @@ multi-degree-of-freedom joints to others). Every name takes the frame prefix.
 
 import argparse
 import math
-import os
 import pathlib
 import sys
-import tempfile
 from xml.etree import ElementTree
 
 from .config import load_gripper_config
+from .mcap_writer import atomic_output
 from .messages import FingerPlacement
 
 __all__ = ['gripper_urdf', 'main', 'mount_rpy']
@@ -106,19 +105,6 @@ def gripper_urdf(config, prefix=''):
     return header + ElementTree.tostring(robot, encoding='unicode') + '\n'
 
 
-def _write_atomically(path, text):
-    """Write `text` to `path` through a temporary file renamed over it (never half written)."""
-    path = pathlib.Path(path)
-    handle, temporary = tempfile.mkstemp(dir=path.parent, prefix=f'.{path.name}.')
-    try:
-        with os.fdopen(handle, 'w', encoding='utf-8') as stream:
-            stream.write(text)
-        os.replace(temporary, path)
-    except BaseException:
-        os.unlink(temporary)
-        raise
-
-
 def main(argv=None):
     """Write the URDF (to stdout by default); exit as the tools do (0, 1 or 2)."""
     parser = argparse.ArgumentParser(
@@ -138,7 +124,8 @@ def main(argv=None):
         return 2
     try:
         if args.out:
-            _write_atomically(args.out, text)
+            with atomic_output(args.out) as temporary:
+                pathlib.Path(temporary).write_text(text, encoding='utf-8')
         else:
             sys.stdout.write(text)
     except OSError as exc:
