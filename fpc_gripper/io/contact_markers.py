@@ -1,9 +1,9 @@
 """RViz markers of a grasp's contact points: a sphere list per finger, in its frame."""
 
-from geometry_msgs.msg import Point
+import numpy as np
 from visualization_msgs.msg import Marker
 
-from .messages import ns_to_time
+from .messages import _MarkerParts, _to_marker
 
 __all__ = ['CONTACT_NAMESPACE', 'contact_marker']
 
@@ -35,20 +35,8 @@ def contact_marker(state, frame_id, stamp_ns, marker_id, diameter=0.003):
     visualization_msgs.msg.Marker
 
     """
-    marker = Marker()
-    marker.header.stamp = ns_to_time(stamp_ns)
-    marker.header.frame_id = frame_id
-    marker.ns = CONTACT_NAMESPACE
-    marker.id = int(marker_id)
-    touching = [] if state is None else state.position[state.in_contact]
-    if not len(touching):
-        marker.action = Marker.DELETE
-        return marker
-    marker.type = Marker.SPHERE_LIST
-    marker.action = Marker.ADD
-    marker.pose.orientation.w = 1.0
-    marker.scale.x = marker.scale.y = marker.scale.z = float(diameter)
-    marker.color.r, marker.color.g, marker.color.b, marker.color.a = _COLOR
-    marker.frame_locked = True
-    marker.points = [Point(x=float(x), y=0.0, z=float(z)) for x, z in touching]
-    return marker
+    touching = np.empty((0, 2)) if state is None else state.position[state.in_contact]
+    points = np.column_stack([touching[:, 0], np.zeros(len(touching)), touching[:, 1]])
+    return _to_marker(_MarkerParts(frame_id, stamp_ns, CONTACT_NAMESPACE, marker_id,
+                                   Marker.SPHERE_LIST, _COLOR, diameter, points=points,
+                                   delete=not len(touching)))
