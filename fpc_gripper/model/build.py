@@ -173,7 +173,7 @@ class Part(typing.NamedTuple):
     """One part of the build: what it runs, what it costs, how hard LLVM optimises it."""
 
     run: typing.Callable[[], None]
-    #: Seconds it compiles for with the other worker busy, measured in its lane (ccm: 4 s
+    #: Seconds it compiles for with the other worker busy, measured in its lane (ccm: 1 s
     #: after grids, about 30 alone): the cost deals them on other than 2 workers.
     seconds: float
     #: LLVM's optimisation level (numba's NUMBA_OPT). Level 1 compiles in 0.6x the time of
@@ -183,8 +183,8 @@ class Part(typing.NamedTuple):
 
 
 PARTS = {
-    'ccm': Part(_ccm, 4, 1), 'contact': Part(_contact, 72, 3), 'grids': Part(_grids, 94, 1),
-    'pcc': Part(_pcc, 23, 1), 'ladder': Part(_ladder, 18, 1), 'adaptive': Part(_adaptive, 1, 1),
+    'ccm': Part(_ccm, 1, 1), 'contact': Part(_contact, 78, 3), 'grids': Part(_grids, 93, 1),
+    'pcc': Part(_pcc, 16, 1), 'ladder': Part(_ladder, 21, 1), 'adaptive': Part(_adaptive, 1, 1),
 }
 
 
@@ -195,6 +195,77 @@ def _run_parts(names, out=sys.stdout):
         os.environ['NUMBA_OPT'] = str(PARTS[name].opt)
         PARTS[name].run()
         print(f'done {name} {time.perf_counter() - start:.1f}', file=out, flush=True)
+
+
+# -- what the workers optimise ---------------------------------------------------------------
+def _kept_functions():
+    """Return the qualified names of the functions whose code the build keeps."""
+    import importlib
+    import pkgutil
+    from numba.core.registry import CPUDispatcher
+    from fpc_gripper import model
+    from fpc_gripper.model import compiled
+    names = {func.__qualname__ for func in compiled._ADOPTED}
+    for package in ('kernels', 'engine', 'discretisations'):
+        path = [str(pathlib.Path(model.__file__).parent / package)]
+        for info in pkgutil.walk_packages(path, f'fpc_gripper.model.{package}.'):
+            for value in vars(importlib.import_module(info.name)).values():
+                if isinstance(value, CPUDispatcher) and isinstance(value._cache, compiled._Cache):
+                    names.add(value.py_func.__qualname__)
+    return names
+
+
+def _optimise_kept_code_only():
+    """
+    Have numba optimise and emit machine code only for the functions the build keeps.
+
+    numba finalises every function it compiles: it links in the finished code of every
+    function it calls, runs LLVM's module passes over the whole and emits machine code. A
+    helper called only from compiled code (the engine's `register_jitable` loops, numba's
+    own internals) is so optimised and emitted once for itself and again inside each
+    function above it: a call chain costs its depth times its size (numba's PR #9566 shows
+    the same). The build keeps only `compiled.jit`'s functions, the ones Python calls; a
+    helper's code runs only inside them, optimised with theirs. So a helper is left as
+    lowered (numba's function passes) and never emitted: the contact part compiles in half
+    the time. The kept code is optimised by the same passes at the same level, and no pass
+    LLVM runs without fast-math changes a float, so the answers are the same
+    (docs/engine_build.md). A kept function missed here fails the build, when numba
+    stores it.
+
+    This reaches into numba's codegen (0.68); with another numba the build runs as numba does.
+    """
+    from numba.core import codegen, cpu
+    library_class = codegen.CPUCodeLibrary
+    if not all(hasattr(library_class, name) for name in (
+            '_optimize_final_module', '_finalize_final_module', '_finalize_dynamic_globals',
+            '_verify_declare_only_symbols')) or not hasattr(cpu.CPUContext, 'get_executable'):
+        return
+    from numba import _dynfunc
+    kept = _kept_functions()
+    optimise, finalise = library_class._optimize_final_module, library_class._finalize_final_module
+    executable = cpu.CPUContext.get_executable
+
+    def optimize_final_module(library):
+        if library.name in kept:
+            optimise(library)
+
+    def finalize_final_module(library):
+        if library.name in kept:
+            finalise(library)
+            return
+        library._finalize_dynamic_globals()
+        library._verify_declare_only_symbols()
+
+    def get_executable(context, library, fndesc, env):
+        if library.name in kept:
+            return executable(context, library, fndesc, env)
+        # Never called: only compiled code calls a helper, and it links the helper's code.
+        return _dynfunc.make_function(fndesc.lookup_module(), fndesc.qualname.split('.')[-1],
+                                      'linked only', 0, env, (library,))
+
+    library_class._optimize_final_module = optimize_final_module
+    library_class._finalize_final_module = finalize_final_module
+    cpu.CPUContext.get_executable = get_executable
 
 
 # -- the driver --------------------------------------------------------------------------------
@@ -210,7 +281,8 @@ def _spawn(args, env_extra, cwd):
 
 #: The two workers' parts on 2 cores, by measurement: parts in one process share what they
 #: compile (grids compiles most of ccm, adaptive and the arc), which dealing by cost alone
-#: cannot see. Measured: 96 s and 117 s per worker this way, 126 s and 100 s dealt.
+#: cannot see. Measured: 94 s and 116 s per worker this way; the ladder beside contact costs
+#: 30 s there instead of 21, 129 s in all.
 TWO_LANES = (('contact', 'pcc'), ('grids', 'ccm', 'adaptive', 'ladder'))
 
 
@@ -371,6 +443,7 @@ def main(argv=None):
     parser.add_argument('--verify', action='store_true', help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.parts:
+        _optimise_kept_code_only()
         _run_parts(args.parts.split(','))
         return 0
     if args.verify:

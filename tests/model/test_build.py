@@ -154,3 +154,16 @@ def test_a_batch_is_the_same_on_one_thread_and_on_every_core():
         np.testing.assert_allclose(one[0], every[0], rtol=0, atol=1e-12)
         np.testing.assert_allclose(one[1], every[1], rtol=1e-12)
         assert np.isfinite(one[0]).all()
+
+
+def test_the_build_optimises_exactly_the_functions_it_stores():
+    """The workers leave linked-only helpers unoptimised: every stored function is kept."""
+    from fpc_gripper.model import build
+    kept = build._kept_functions()
+    # numba names each stored function's index '<module tail>.<qualname>-<line>.py<ver>.nbi'.
+    stored = {path.name.split('-')[0].split('.', 1)[1]
+              for path in compiled.BUILD_DIR.glob('*.nbi')}
+    assert stored and stored <= kept, sorted(stored - kept)
+    assert {'_solve_entry', '_rigidity_entry', '_contact_entry'} <= kept
+    # The engine's register_jitable loops are linked into the entries, never stored.
+    assert not {'_contact_settle', '_constrained_newton', '_newton'} & kept
