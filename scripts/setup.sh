@@ -26,7 +26,7 @@ if [ -n "$extra" ]; then
   echo "setup.sh: removing from .venv what requirements.lock does not pin:" $extra
   "${pip[@]}" uninstall -q -y $extra
 fi
-# The compiled engine (about 2.5 min on 2 cores, once; nothing compiles at run time after) needs
+# The compiled engine (about 1.5 min on 2 cores, once; nothing compiles at run time after) needs
 # only numpy, scipy and numba: install those, start it from the source tree, and install the
 # rest and build the interfaces beside it. In its own process group, so that a failed or
 # interrupted set-up stops its workers too.

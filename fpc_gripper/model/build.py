@@ -183,8 +183,8 @@ class Part(typing.NamedTuple):
 
 
 PARTS = {
-    'ccm': Part(_ccm, 1, 1), 'contact': Part(_contact, 78, 3), 'grids': Part(_grids, 93, 1),
-    'pcc': Part(_pcc, 16, 1), 'ladder': Part(_ladder, 21, 1), 'adaptive': Part(_adaptive, 1, 1),
+    'ccm': Part(_ccm, 1, 1), 'contact': Part(_contact, 39, 3), 'grids': Part(_grids, 56, 1),
+    'pcc': Part(_pcc, 7, 1), 'ladder': Part(_ladder, 13, 1), 'adaptive': Part(_adaptive, 1, 1),
 }
 
 
@@ -226,9 +226,9 @@ def _optimise_kept_code_only():
     function above it: a call chain costs its depth times its size (numba's PR #9566 shows
     the same). The build keeps only `compiled.jit`'s functions, the ones Python calls; a
     helper's code runs only inside them, optimised with theirs. So a helper is left as
-    lowered (numba's function passes) and never emitted: the contact part compiles in half
-    the time. The kept code is optimised by the same passes at the same level, and no pass
-    LLVM runs without fast-math changes a float, so the answers are the same
+    lowered (numba's function passes) and never emitted: the build takes half the time.
+    The kept code is optimised by the same passes at the same level, and no pass LLVM
+    runs without fast-math changes a float, so the answers are the same
     (docs/engine_build.md). A kept function missed here fails the build, when numba
     stores it.
 
@@ -236,9 +236,10 @@ def _optimise_kept_code_only():
     """
     from numba.core import codegen, cpu
     library_class = codegen.CPUCodeLibrary
-    if not all(hasattr(library_class, name) for name in (
-            '_optimize_final_module', '_finalize_final_module', '_finalize_dynamic_globals',
-            '_verify_declare_only_symbols')) or not hasattr(cpu.CPUContext, 'get_executable'):
+    needed = ('_optimize_final_module', '_finalize_final_module', '_finalize_dynamic_globals',
+              '_verify_declare_only_symbols', '_finalized')
+    if not all(hasattr(library_class, name) for name in needed) \
+            or not hasattr(cpu.CPUContext, 'get_executable'):
         return
     from numba import _dynfunc
     kept = _kept_functions()
@@ -255,6 +256,7 @@ def _optimise_kept_code_only():
             return
         library._finalize_dynamic_globals()
         library._verify_declare_only_symbols()
+        library._finalized = True
 
     def get_executable(context, library, fndesc, env):
         if library.name in kept:
@@ -281,8 +283,8 @@ def _spawn(args, env_extra, cwd):
 
 #: The two workers' parts on 2 cores, by measurement: parts in one process share what they
 #: compile (grids compiles most of ccm, adaptive and the arc), which dealing by cost alone
-#: cannot see. Measured: 94 s and 116 s per worker this way; the ladder beside contact costs
-#: 30 s there instead of 21, 129 s in all.
+#: cannot see. Measured: 46 s and 70 s per worker this way (75 s in all, 2.0 min of CPU); with
+#: the ladder beside contact 69 s and 61 s (73 s in all, 2.3 min of CPU).
 TWO_LANES = (('contact', 'pcc'), ('grids', 'ccm', 'adaptive', 'ladder'))
 
 
