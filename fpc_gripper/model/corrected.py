@@ -1,0 +1,329 @@
+"""The continuum-corrected fast rung: the PCC rod with effective parameters fitted to the FE."""
+
+from dataclasses import dataclass
+import math
+
+import numpy as np
+
+from .discretisations.pcc import PCCSolver
+from .engine import CompiledProblem, NewtonOptions
+from .kernels import pcc as kernels
+from .kernels.circle import circle_fit
+from .kernels.pcc_section import section_arrays
+from .result import finger_constants, Result
+from .section.law import _add_linear, _box_moments, SectionLaw, station_layout
+from .section.segments import share_segments
+
+__all__ = ['ContinuumCorrection', 'CorrectedSolver', 'PAPER_PHYSICS', 'CONTINUUM_FIT',
+           'CLAMP_ZONE', 'CHANNEL_END_ZONE', 'CORRECTED_SEGMENTS', 'corrected_layout',
+           'shear_displacements']
+
+#: Length of the clamp zone from the clamp edge [m]: the Saint-Venant zone where the
+#: clamped face holds the PEMC's shortening (the FE's first 2-5 mm, docs/physics.md 18.1).
+CLAMP_ZONE = 3.0e-3
+#: Length of the channel-end zone, ending at the channel end [m]: the channel's last
+#: millimetres, held by the solid tip beyond it.
+CHANNEL_END_ZONE = 4.0e-3
+#: Segments of the corrected rung's PCC: the calibration's discretisation (FIT_SEGMENTS).
+CORRECTED_SEGMENTS = 32
+#: Step caps of the PCC (its own `_CAP`): 0.1 on (eps, c1), 0.5 rad on the angles.
+_CAP = np.array([0.1, 0.1, 0.5])
+#: Column of a segment's angle in the engine's unknowns (eps, c1, theta) per segment.
+_THETA = 2
+#: Bounds of each stiffness factor [-] and of the shear compliance [1/N].
+FACTOR_BOUNDS = (0.05, 20.0)
+COMPLIANCE_BOUNDS = (0.0, 1.0)
+
+
+@dataclass(frozen=True)
+class ContinuumCorrection:
+    """
+    Effective parameters that bring the plane-section rod to the 2-D continuum.
+
+    Parameters
+    ----------
+    band_stiffness : float
+        Factor on the stiffness of the fluidic layer's band beside the channel (its solid
+        between the channel's floor and ceiling, z in [-h3b, h3a], in every channel
+        section) [-]. Below 1: in 2-D the soft band between ribs shears and carries less
+        than the section law's plane sections say.
+    clamp_stiffness : float
+        Factor on the whole linear section stiffness over the first `CLAMP_ZONE` [-].
+        Above 1: the clamped face holds the PEMC's shortening there, so the finger curls
+        less near the clamp than the section law says.
+    channel_end_stiffness : float
+        Factor on the linear section stiffness over the channel's last `CHANNEL_END_ZONE`
+        [-]. Above 1: the solid tip stiffens the channel's end beyond its own section.
+    shear_compliance : float
+        1 / (k G A) of the section [1/N]: the shear strain V / (k G A) of the soft layers
+        under a shear force V, which plane sections leave out (Timoshenko). It moves every
+        point by the integral of gamma n along the arc (first order in the compliance).
+
+    """
+
+    band_stiffness: float = 1.0
+    clamp_stiffness: float = 1.0
+    channel_end_stiffness: float = 1.0
+    shear_compliance: float = 0.0
+
+    def __post_init__(self):
+        for name in ('band_stiffness', 'clamp_stiffness', 'channel_end_stiffness'):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, float, np.integer,
+                                                                 np.floating)):
+                raise TypeError(f'`{name}` must be a real number [-], got {value!r}')
+            if not (math.isfinite(value) and FACTOR_BOUNDS[0] <= value <= FACTOR_BOUNDS[1]):
+                raise ValueError(f'`{name}` must be in [{FACTOR_BOUNDS[0]}, '
+                                 f'{FACTOR_BOUNDS[1]}] [-], got {value}')
+            object.__setattr__(self, name, float(value))
+        value = self.shear_compliance
+        if isinstance(value, bool) or not isinstance(value, (int, float, np.integer,
+                                                             np.floating)):
+            raise TypeError(f'`shear_compliance` must be a real number [1/N], got {value!r}')
+        if not (math.isfinite(value) and COMPLIANCE_BOUNDS[0] <= value <= COMPLIANCE_BOUNDS[1]):
+            raise ValueError(f'`shear_compliance` must be in [{COMPLIANCE_BOUNDS[0]}, '
+                             f'{COMPLIANCE_BOUNDS[1]}] [1/N], got {value}')
+        object.__setattr__(self, 'shear_compliance', float(value))
+
+    @property
+    def values(self):
+        """Return the four parameters as an array, field order."""
+        return np.array([self.band_stiffness, self.clamp_stiffness,
+                         self.channel_end_stiffness, self.shear_compliance])
+
+
+#: No correction: the paper's plane-section physics (the corrected rung is then the PCC).
+PAPER_PHYSICS = ContinuumCorrection()
+#: Fitted to the FE table's 15 unpressurised scenes (bench/results/continuum.json) by
+#: bench/fit_continuum.py; its result, with the per-scene errors, is
+#: bench/results/continuum_fit.json. Numbers, not a fit at import (STYLE: constants).
+CONTINUUM_FIT = ContinuumCorrection(band_stiffness=0.7217, clamp_stiffness=1.300,
+                                    channel_end_stiffness=3.892, shear_compliance=0.01742)
+
+
+def _band_stiffness(design, gas_width):
+    """Return K of the fluidic band beside a channel of gas width [m] (3, 3)."""
+    k = np.zeros((3, 3))
+    _add_linear(k, _box_moments(-design.h3b, design.h3a, design.Ly - gas_width),
+                design.fluidic_layer, 1.0)
+    return k
+
+
+def corrected_layout(design, correction):
+    """
+    Section layout of the corrected rung: `station_layout` with the effective stiffnesses.
+
+    Parameters
+    ----------
+    design : ActuatorDesign
+    correction : ContinuumCorrection
+
+    Returns
+    -------
+    breaks : ndarray, shape (K + 1,)
+        Interval ends, the zone edges among them [m].
+    types : ndarray of int, shape (K,)
+    law : SectionLaw
+        The paper's types with the band factor, then the zones' scaled copies.
+
+    """
+    breaks, types, law = station_layout(design, ribs='exact')
+    stiffness = list(law.stiffness.copy())
+    gas = list(law.gas)
+    labels = list(law.labels)
+    height = design.h3a + design.h3b
+    for j in range(law.n_types - 1):
+        stiffness[j] = stiffness[j] + (correction.band_stiffness - 1.0) * \
+            _band_stiffness(design, law.gas[j, 0] / height)
+    end = design.channel_end
+    zones = [((0.0, min(CLAMP_ZONE, end)), correction.clamp_stiffness, 'clamp zone'),
+             ((max(end - CHANNEL_END_ZONE, min(CLAMP_ZONE, end)), end),
+              correction.channel_end_stiffness, 'channel-end zone')]
+    # A zone edge within 1 um of a section change is that change: no sliver intervals.
+    cuts = list(breaks)
+    for (lo, hi), _, _ in zones:
+        for edge in (lo, hi):
+            if np.min(np.abs(np.asarray(cuts) - edge)) > 1e-6:
+                cuts.append(edge)
+    cuts = np.array(sorted(cuts))
+    middle = 0.5 * (cuts[:-1] + cuts[1:])
+    new_types = types[np.clip(np.searchsorted(breaks, middle, side='right') - 1, 0,
+                              types.size - 1)]
+    copies = {}
+    for (lo, hi), factor, label in zones:
+        inside = (middle > lo) & (middle < hi)
+        for k in np.flatnonzero(inside):
+            key = (label, int(new_types[k]))
+            if key not in copies:
+                copies[key] = len(stiffness)
+                stiffness.append(stiffness[key[1]] * factor)
+                gas.append(gas[key[1]])
+                labels.append(f'{labels[key[1]]}, {label}')
+            new_types[k] = copies[key]
+    law = SectionLaw(stiffness=np.array(stiffness), gas=np.array(gas), pemc_z=law.pemc_z,
+                     pemc_weights=law.pemc_weights, prestrain=law.prestrain, emc=law.emc,
+                     labels=tuple(labels))
+    return cuts, np.asarray(new_types, dtype=int), law
+
+
+def _moments(a, b, length):
+    """Return int n n^T ds as (xx, xz, zz), shape (3, ...), over parts from angle a to b [m]."""
+    d = b - a
+    # sin(d) / d loses no digits as d -> 0; only d = 0 itself needs a stand-in (sinc 1).
+    d = np.where(d == 0.0, 1e-300, d)
+    half = 0.5 * length
+    sinc = np.sin(d) / d * half
+    c = np.cos(a + b) * sinc
+    return np.stack([half - c, -np.sin(a + b) * sinc, half + c])
+
+
+def shear_displacements(theta, lengths, segment, offset, force, compliance):
+    """
+    Move of material points by the shear strain of a tip force (first order) [m].
+
+    The shear force at arc length s is V = F . n(s), n the normal of the tangent at angle
+    phi(s) (from +X towards +Z); the shear strain V / (k G A) moves the section along n,
+    so a point at s moves by c int_0^s n n^T ds F, with phi linear in each PCC segment:
+    int n n^T ds = (l / 2) (I - [[C, S], [S, -C]]), (C, S) = (cos, sin)(a + b) sinc(b - a)
+    over a segment part of reference length l from angle a to b.
+
+    Parameters
+    ----------
+    theta : ndarray, shape (N,)
+        End angle of every segment (the first starts at 0) [rad].
+    lengths : ndarray, shape (N,)
+        Reference lengths [m].
+    segment, offset : ndarray, shape (M,)
+        Segment of every point and its arc length into it [m].
+    force : ndarray, shape (2,)
+        Tip force (f0, p0) [N].
+    compliance : float
+        1 / (k G A) [1/N].
+
+    Returns
+    -------
+    ndarray, shape (M, 2)
+
+    """
+    theta = np.asarray(theta, dtype=float)
+    lengths = np.asarray(lengths, dtype=float)
+    segment = np.asarray(segment)
+    offset = np.asarray(offset, dtype=float)
+    start = np.empty_like(theta)
+    start[0] = 0.0
+    start[1:] = theta[:-1]
+    whole = np.zeros((3, theta.size + 1))
+    np.cumsum(_moments(start, theta, lengths), axis=1, out=whole[:, 1:])
+    a = start[segment]
+    xx, xz, zz = whole[:, segment] + _moments(
+        a, a + (theta[segment] - a) * (offset / lengths[segment]), offset)
+    out = np.empty((segment.size, 2))
+    out[:, 0] = xx * force[0] + xz * force[1]
+    out[:, 1] = xz * force[0] + zz * force[1]
+    return compliance * out
+
+
+class CorrectedSolver(PCCSolver):
+    """
+    The fast rung corrected to the 2-D continuum: the PCC on a corrected section layout.
+
+    The PCC rod (`PCCSolver`, its compiled kernels unchanged) on `corrected_layout`, with
+    the shear displacements of the tip force added to the tip, nodes, samples and
+    `position_at`. With `PAPER_PHYSICS` it is the paper's PCC. Fitted to the unpressurised
+    FE scenes only: under pressure the FE is no reference (docs/physics.md, section 18).
+
+    Parameters
+    ----------
+    design : ActuatorDesign
+    correction : ContinuumCorrection
+        Default `CONTINUUM_FIT`.
+    n_segments : int
+        Segments of the PCC (`CORRECTED_SEGMENTS`, the fit's).
+    pressure_model : {None, 'adiabatic', 'isobaric'}
+
+    """
+
+    def __init__(self, design, correction=CONTINUUM_FIT, n_segments=CORRECTED_SEGMENTS,
+                 pressure_model=None, **options):
+        if not isinstance(correction, ContinuumCorrection):
+            raise TypeError(f'`correction` must be a ContinuumCorrection, '
+                            f'got {type(correction).__name__}')
+        super().__init__(design, n_segments, pressure_model, **options)
+        self.correction = correction
+        breaks, types, law = corrected_layout(design, correction)
+        counts = share_segments(np.diff(breaks), max(int(n_segments), types.size))
+        self.edges = np.concatenate([*(np.linspace(a, b, c + 1)[:-1]
+                                       for a, b, c in zip(breaks, breaks[1:], counts)),
+                                     breaks[-1:]])
+        self.segment_types, self.law = np.repeat(types, counts), law
+        # The rest as PCCSolver.__init__ builds it from its layout (kernels unchanged).
+        self.lengths = np.diff(self.edges)
+        self.n_segments = n = self.lengths.size
+        self._stiffness, self._gas, self._pemc = section_arrays(self.law, self.segment_types)
+        s = np.linspace(0.0, self.length, self.samples)
+        seg = np.clip(np.searchsorted(self.edges, s, side='right') - 1, 0, n - 1)
+        self._sample_segment = seg.astype(np.int64)
+        self._sample_offset = s - self.edges[seg]
+        self.gradient_scale = float(self.law.stiffness[:, 1, 1].max()) / self.length
+        self._options = NewtonOptions(max_iterations=self.max_iterations, xtol=self.tol,
+                                      max_step=np.tile(_CAP, n),
+                                      energy_scale=self.gradient_scale)
+        self._data = kernels.PCCData(self.lengths, self._stiffness, self._gas, self._pemc,
+                                     float(self.pressure_coefficient), self.gradient_scale,
+                                     self._sample_segment, self._sample_offset)
+        self.engine_problem = CompiledProblem(self._data, self._data, self.flat(),
+                                              self.gradient_scale)
+        self._constants = finger_constants(self.rung, self.n_segments, self.edges)
+        self._constants['model'] = f'pcc N={self.n_segments}, continuum-corrected'
+
+    def _result(self, outcome, pressure, tip_force, point_loads=(), model_choice=None,
+                **level):
+        result = super()._result(outcome, pressure, tip_force, point_loads, model_choice,
+                                 **level)
+        force = np.asarray(result.tip_force, dtype=float)
+        compliance = self.correction.shear_compliance
+        if compliance == 0.0 or not force.any():
+            return result
+        fields = dict(result.__dict__)
+        x = result.x
+        theta = x[_THETA::3]
+        start = np.empty_like(theta)
+        start[0] = 0.0
+        start[1:] = theta[:-1]
+        parts = _moments(start, theta, self.lengths)
+        xx, xz, zz = parts.sum(axis=1)
+        fields['tip'] = result.tip + compliance * np.array(
+            [xx * force[0] + xz * force[1], xz * force[0] + zz * force[1]])
+        edges, lengths, n = self.edges, self.lengths, self.n_segments
+        if result.nodes is not None:
+            whole = np.zeros((3, n + 1))
+            np.cumsum(parts, axis=1, out=whole[:, 1:])
+            fields['nodes'] = result.nodes + compliance * np.stack(
+                [whole[0] * force[0] + whole[1] * force[1],
+                 whole[1] * force[0] + whole[2] * force[1]], axis=1)
+            seg, off = self._sample_segment, self._sample_offset
+            a = start[seg]
+            xx, xz, zz = whole[:, seg] + _moments(
+                a, a + (theta[seg] - a) * (off / lengths[seg]), off)
+            fields['points'] = result.points + compliance * np.stack(
+                [xx * force[0] + xz * force[1], xz * force[0] + zz * force[1]], axis=1)
+            curvature, rmsd = (float(v) for v in circle_fit(fields['points'])[:2])
+            fields['curvature'], fields['fit_rmsd'] = curvature, rmsd
+        base = result.position_at
+
+        def position_at(s):
+            s_arr = np.asarray(s, dtype=float)
+            seg = np.clip(np.searchsorted(edges, s_arr, side='right') - 1, 0, n - 1)
+            moved = shear_displacements(
+                theta, lengths, np.atleast_1d(seg),
+                np.atleast_1d(np.minimum(s_arr - edges[seg], lengths[seg])), force, compliance)
+            return np.asarray(base(s)) + (moved[0] if s_arr.ndim == 0 else moved)
+
+        fields['position_at'] = position_at
+        return Result.of(fields)
+
+    def rigidity(self, *args, **kwargs):
+        """Refuse: the displacement control does not carry the shear correction."""
+        raise NotImplementedError('CorrectedSolver.rigidity: the bordered displacement '
+                                  'control does not include the shear correction; use '
+                                  'solve() with a tip force')
