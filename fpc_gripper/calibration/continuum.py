@@ -3,10 +3,10 @@
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import least_squares
 
+from .fit import _ModelFailure, CalibrationStatus, least_squares_fit, solve_scene
 from ..model.corrected import (COMPLIANCE_BOUNDS, ContinuumCorrection, CorrectedSolver,
-                               FACTOR_BOUNDS, PAPER_PHYSICS)
+                               FACTOR_BOUNDS, PAPER_PHYSICS, PARAMETERS)
 from ..model.design import ActuatorDesign
 
 __all__ = ['CORRECTION_NAMES', 'CORRECTION_UNITS', 'FEScene', 'fe_scenes', 'correction_tips',
@@ -19,6 +19,8 @@ CORRECTION_UNITS = {'band_stiffness': '-', 'clamp_stiffness': '-',
                     'channel_end_stiffness': '-', 'shear_compliance': '1/N'}
 #: Typical size of each parameter: the fit works in value / scale.
 _SCALE = np.array([1.0, 1.0, 1.0, 0.01])
+#: Unit of the tip residuals [m].
+_TIP_SCALE = 1e-3
 
 
 @dataclass(frozen=True)
@@ -54,6 +56,67 @@ def fe_scenes(table):
     return out
 
 
+class _CorrectionProblem:
+    """
+    Tip residuals r(u) over the FE scenes and their exact Jacobian, for `least_squares_fit`.
+
+    u is the correction / `_SCALE`; r is the corrected rung's tip minus the FE's, in
+    `_TIP_SCALE`. Every evaluation builds a `CorrectedSolver` per prestrain and solves
+    every scene cold (`fit.solve_scene`), so r is a function of u alone. The stiffness
+    factors' columns come through the engine's sensitivities (`engine.sensitivity` of the
+    solver's `parameter_gradient`), as the calibration's parameters do; the shear
+    compliance's is the tip's shear move per unit compliance (`CorrectedSolver.shear_tip`).
+    """
+
+    def __init__(self, scenes, design):
+        self.scenes = list(scenes)
+        self.base = ActuatorDesign.paper() if design is None else design
+        self.measured = np.array([s.tip for s in self.scenes])
+        self._memo = (None, None)
+        self.nfev = self.njev = 0
+
+    def models(self, values):
+        """Return {prestrain: {'solver', 'scenes'}} at the correction's values (last kept)."""
+        key = np.asarray(values, dtype=float).tobytes()
+        if self._memo[0] != key:
+            correction = ContinuumCorrection(*values)
+            self._memo = (key, {p: {'solver': CorrectedSolver(self.base.replace(prestrain=p),
+                                                              correction),
+                                    'scenes': {}}
+                                for p in sorted({s.prestrain for s in self.scenes})})
+        return self._memo[1]
+
+    def predict(self, values, sensitivities=False):
+        """Return the tips (K, 2) [m] and, with `sensitivities`, d tip / d values (K, 2, 4)."""
+        models = self.models(values)
+        tips = np.empty((len(self.scenes), 2))
+        slopes = np.empty((len(self.scenes), 2, len(CORRECTION_NAMES)))
+        factors = [PARAMETERS.index(n) for n in CORRECTION_NAMES[:3]]
+        for k, scene in enumerate(self.scenes):
+            model = models[scene.prestrain]
+            solved = solve_scene(model, 0.0, scene.tip_force, sensitivities)
+            tips[k] = solved.result.tip
+            if sensitivities:
+                solver = model['solver']
+                move, shear = solver.shear_tip(solved.x, scene.tip_force)
+                along = solver.node_jacobian(solved.x, solver.tip_node)[1] \
+                    + values[3] * shear
+                slopes[k, :, :3] = along @ solved.rates[factors].T
+                slopes[k, :, 3] = move
+        return tips, slopes
+
+    def residuals(self, u):
+        """Tip minus FE tip of every scene, (x, z) each, in `_TIP_SCALE`."""
+        self.nfev += 1
+        return (self.predict(u * _SCALE)[0] - self.measured).ravel() / _TIP_SCALE
+
+    def jacobian(self, u):
+        """Exact d residuals / d u."""
+        self.njev += 1
+        slopes = self.predict(u * _SCALE, sensitivities=True)[1]
+        return slopes.reshape(-1, len(CORRECTION_NAMES)) * _SCALE / _TIP_SCALE
+
+
 def correction_tips(correction, scenes, design=None):
     """
     Tip of the corrected rung in every scene [m], shape (K, 2).
@@ -65,22 +128,16 @@ def correction_tips(correction, scenes, design=None):
     design : ActuatorDesign, optional
         The base design (its prestrain replaced by each scene's); the paper's by default.
 
+    Raises
+    ------
+    ValueError
+        Naming `correction` where a scene has no equilibrium.
+
     """
-    base = ActuatorDesign.paper() if design is None else design
-    solvers = {}
-    tips = np.empty((len(scenes), 2))
-    for k, scene in enumerate(scenes):
-        solver = solvers.get(scene.prestrain)
-        if solver is None:
-            solver = solvers[scene.prestrain] = CorrectedSolver(
-                base.replace(prestrain=scene.prestrain), correction)
-        result = solver.solve(0.0, scene.tip_force, outputs='tip')
-        if not result.success:
-            raise ValueError(f'`correction` {correction} has no equilibrium at prestrain '
-                             f'{scene.prestrain}, tip force {scene.tip_force} N: '
-                             f'{result.message}')
-        tips[k] = result.tip
-    return tips
+    try:
+        return _CorrectionProblem(scenes, design).predict(correction.values)[0]
+    except _ModelFailure as failure:
+        raise ValueError(f'`correction` {correction}: {failure}') from None
 
 
 @dataclass(frozen=True)
@@ -91,32 +148,35 @@ class CorrectionFit:
     Attributes
     ----------
     success : bool
+    status : CalibrationStatus
     message : str
     correction : ContinuumCorrection
     errors : ndarray, shape (K,)
         Tip distance to the FE of every scene at the estimate [m].
     initial_errors : ndarray, shape (K,)
         The same at the start [m].
-    nfev : int
+    nfev, njev : int
+        Residual and (exact) Jacobian evaluations.
 
     """
 
     success: bool
+    status: CalibrationStatus
     message: str
     correction: ContinuumCorrection
     errors: np.ndarray
     initial_errors: np.ndarray
     nfev: int
+    njev: int
 
 
 def fit_correction(scenes, start=PAPER_PHYSICS, design=None, max_nfev=60):
     """
     Fit the four correction parameters to FE tips by least squares.
 
-    `scipy.optimize.least_squares` (trust-region reflective, bounded by the parameters'
-    bounds) of the tip residuals [m] over every scene. The model's derivatives in these
-    parameters are not in the engine's sensitivities (`SECTION_PARAMETERS` does not hold
-    them), so the Jacobian is scipy's 3-point difference of the deterministic residuals.
+    The calibration's least-squares loop (`fit.least_squares_fit`, linear loss: the FE
+    is noise-free) of the tip residuals over every scene, bounded by the parameters'
+    bounds, with the exact Jacobian of `_CorrectionProblem`.
 
     Parameters
     ----------
@@ -126,32 +186,33 @@ def fit_correction(scenes, start=PAPER_PHYSICS, design=None, max_nfev=60):
     design : ActuatorDesign, optional
         The base design; the paper's by default.
     max_nfev : int
+        Largest number of residual evaluations.
 
     Returns
     -------
     CorrectionFit
 
     """
-    measured = np.array([s.tip for s in scenes])
+    if isinstance(max_nfev, bool) or not isinstance(max_nfev, (int, np.integer)) \
+            or max_nfev < 1:
+        raise ValueError(f'`max_nfev` must be an integer >= 1, got {max_nfev!r}')
+    problem = _CorrectionProblem(scenes, design)
     lower = np.array([FACTOR_BOUNDS[0]] * 3 + [COMPLIANCE_BOUNDS[0]]) / _SCALE
     upper = np.array([FACTOR_BOUNDS[1]] * 3 + [COMPLIANCE_BOUNDS[1]]) / _SCALE
-
-    def correction(u):
-        return ContinuumCorrection(*np.clip(u, lower, upper) * _SCALE)
-
-    def residuals(u):
-        return (correction_tips(correction(u), scenes, design) - measured).ravel()
-
-    u0 = start.values / _SCALE
-    initial = np.linalg.norm(correction_tips(start, scenes, design) - measured, axis=1)
-    fitted = least_squares(residuals, u0, jac='3-point', bounds=(lower, upper), method='trf',
-                           x_scale=1.0, xtol=1e-10, ftol=1e-12, gtol=1e-12,
-                           max_nfev=int(max_nfev))
-    best = correction(fitted.x)
-    errors = np.linalg.norm(correction_tips(best, scenes, design) - measured, axis=1)
-    return CorrectionFit(success=bool(fitted.status > 0), message=str(fitted.message),
-                         correction=best, errors=errors, initial_errors=initial,
-                         nfev=int(fitted.nfev))
+    initial = np.linalg.norm(correction_tips(start, scenes, design) - problem.measured, axis=1)
+    try:
+        fitted = least_squares_fit(problem, start.values / _SCALE, lower, upper, 'linear',
+                                   max_nfev)
+    except _ModelFailure as failure:
+        return CorrectionFit(False, failure.status, str(failure), start, initial * np.nan,
+                             initial, problem.nfev, problem.njev)
+    best = ContinuumCorrection(*np.clip(fitted.x, lower, upper) * _SCALE)
+    errors = np.linalg.norm(correction_tips(best, scenes, design) - problem.measured, axis=1)
+    status = CalibrationStatus.SUCCESS if fitted.status > 0 else \
+        CalibrationStatus.MAX_EVALUATIONS
+    return CorrectionFit(success=status is CalibrationStatus.SUCCESS, status=status,
+                         message=str(fitted.message), correction=best, errors=errors,
+                         initial_errors=initial, nfev=problem.nfev, njev=problem.njev)
 
 
 def rounded(correction, digits=4):

@@ -11,12 +11,13 @@ from .kernels import pcc as kernels
 from .kernels.circle import circle_fit
 from .kernels.pcc_section import section_arrays
 from .result import finger_constants, Result
-from .section.law import _add_linear, _box_moments, SectionLaw, station_layout
+from .section.law import (_add_linear, _box_moments, SECTION_PARAMETERS, SectionLaw,
+                          station_layout)
 from .section.segments import share_segments
 
 __all__ = ['ContinuumCorrection', 'CorrectedSolver', 'PAPER_PHYSICS', 'CONTINUUM_FIT',
            'CLAMP_ZONE', 'CHANNEL_END_ZONE', 'CORRECTED_SEGMENTS', 'corrected_layout',
-           'shear_displacements']
+           'shear_displacements', 'PARAMETERS']
 
 #: Length of the clamp zone from the clamp edge [m]: the Saint-Venant zone where the
 #: clamped face holds the PEMC's shortening (the FE's first 2-5 mm, docs/physics.md 18.1).
@@ -30,6 +31,10 @@ CORRECTED_SEGMENTS = 32
 _CAP = np.array([0.1, 0.1, 0.5])
 #: Column of a segment's angle in the engine's unknowns (eps, c1, theta) per segment.
 _THETA = 2
+#: Parameters of `CorrectedSolver.parameter_gradient`: `SECTION_PARAMETERS`, then the
+#: stiffness factors (the shear compliance acts after the solve: `CorrectedSolver.shear_tip`).
+PARAMETERS = SECTION_PARAMETERS + ('band_stiffness', 'clamp_stiffness',
+                                   'channel_end_stiffness')
 #: Bounds of each stiffness factor [-] and of the shear compliance [1/N].
 FACTOR_BOUNDS = (0.05, 20.0)
 COMPLIANCE_BOUNDS = (0.0, 1.0)
@@ -113,6 +118,9 @@ def corrected_layout(design, correction):
     """
     Section layout of the corrected rung: `station_layout` with the effective stiffnesses.
 
+    Every type's K is linear in each stiffness factor: a channel type's is K0 + (b - 1) B
+    (B the band's, `_band_stiffness`), its copy in a zone f (K0 + (b - 1) B).
+
     Parameters
     ----------
     design : ActuatorDesign
@@ -124,24 +132,33 @@ def corrected_layout(design, correction):
         Interval ends, the zone edges among them [m].
     types : ndarray of int, shape (K,)
     law : SectionLaw
-        The paper's types with the band factor, then the zones' scaled copies.
+        The paper's types with the band factor, then the zones' scaled copies (with their
+        `modulus_directions`).
+    directions : ndarray, shape (3, S, 3, 3)
+        dK / d(band, clamp, channel-end factor) of every type [N, N m, N m^2].
 
     """
     breaks, types, law = station_layout(design, ribs='exact')
-    stiffness = list(law.stiffness.copy())
-    gas = list(law.gas)
-    labels = list(law.labels)
-    height = design.h3a + design.h3b
-    for j in range(law.n_types - 1):
-        stiffness[j] = stiffness[j] + (correction.band_stiffness - 1.0) * \
-            _band_stiffness(design, law.gas[j, 0] / height)
+    fl_modulus = design.fluidic_layer.E1
+    base, band, moduli = [], [], []
+    for j in range(law.n_types):
+        b = np.zeros((3, 3)) if j == law.n_types - 1 else \
+            _band_stiffness(design, law.gas[j, 0] / (design.h3a + design.h3b))
+        base.append(law.stiffness[j] + (correction.band_stiffness - 1.0) * b)
+        band.append(b)
+        # The band is fluidic layer: linear in its E1 (E2 / E1 and nu held).
+        moduli.append(law.modulus_directions[:, j]
+                      + np.array([np.zeros((3, 3)), (correction.band_stiffness - 1.0) * b
+                                  / fl_modulus]))
+    stiffness, gas, labels = list(base), list(law.gas), list(law.labels)
+    directions = [[b, np.zeros((3, 3)), np.zeros((3, 3))] for b in band]
     end = design.channel_end
-    zones = [((0.0, min(CLAMP_ZONE, end)), correction.clamp_stiffness, 'clamp zone'),
+    zones = [((0.0, min(CLAMP_ZONE, end)), correction.clamp_stiffness, 'clamp zone', 1),
              ((max(end - CHANNEL_END_ZONE, min(CLAMP_ZONE, end)), end),
-              correction.channel_end_stiffness, 'channel-end zone')]
+              correction.channel_end_stiffness, 'channel-end zone', 2)]
     # A zone edge within 1 um of a section change is that change: no sliver intervals.
     cuts = list(breaks)
-    for (lo, hi), _, _ in zones:
+    for (lo, hi), _, _, _ in zones:
         for edge in (lo, hi):
             if np.min(np.abs(np.asarray(cuts) - edge)) > 1e-6:
                 cuts.append(edge)
@@ -150,20 +167,26 @@ def corrected_layout(design, correction):
     new_types = types[np.clip(np.searchsorted(breaks, middle, side='right') - 1, 0,
                               types.size - 1)]
     copies = {}
-    for (lo, hi), factor, label in zones:
+    for (lo, hi), factor, label, row in zones:
         inside = (middle > lo) & (middle < hi)
         for k in np.flatnonzero(inside):
-            key = (label, int(new_types[k]))
+            j = int(new_types[k])
+            key = (label, j)
             if key not in copies:
                 copies[key] = len(stiffness)
-                stiffness.append(stiffness[key[1]] * factor)
-                gas.append(gas[key[1]])
-                labels.append(f'{labels[key[1]]}, {label}')
+                stiffness.append(base[j] * factor)
+                moduli.append(moduli[j] * factor)
+                gas.append(gas[j])
+                labels.append(f'{labels[j]}, {label}')
+                direction = [band[j] * factor, np.zeros((3, 3)), np.zeros((3, 3))]
+                direction[row] = base[j]
+                directions.append(direction)
             new_types[k] = copies[key]
     law = SectionLaw(stiffness=np.array(stiffness), gas=np.array(gas), pemc_z=law.pemc_z,
                      pemc_weights=law.pemc_weights, prestrain=law.prestrain, emc=law.emc,
-                     labels=tuple(labels))
-    return cuts, np.asarray(new_types, dtype=int), law
+                     labels=tuple(labels), modulus_directions=np.stack(moduli, axis=1))
+    return cuts, np.asarray(new_types, dtype=int), law, \
+        np.array(directions).transpose(1, 0, 2, 3)
 
 
 def _moments(a, b, length):
@@ -175,6 +198,27 @@ def _moments(a, b, length):
     sinc = np.sin(d) / d * half
     c = np.cos(a + b) * sinc
     return np.stack([half - c, -np.sin(a + b) * sinc, half + c])
+
+
+def _moment_rates(a, b, length):
+    """
+    Return d/da and d/db of `_moments` (xx, xz, zz), each shape (3, ...) [m/rad].
+
+    With p = a + b, d = b - a and s(d) = sin(d) / d: c = (l / 2) cos(p) s(d) gives
+    dc/da = (l / 2)(-sin p s - cos p s'), dc/db = (l / 2)(-sin p s + cos p s'), and
+    xz = -(l / 2) sin(p) s the same way; s'(d) = (cos d - s) / d, by its series near 0.
+    """
+    d = b - a
+    small = np.abs(d) < 1e-2
+    safe = np.where(small, 1.0, d)
+    sinc = np.where(small, 1.0 - d * d / 6.0 + d ** 4 / 120.0, np.sin(safe) / safe)
+    slope = np.where(small, -d / 3.0 + d ** 3 / 30.0 - d ** 5 / 840.0,
+                     (np.cos(safe) - np.sin(safe) / safe) / safe)
+    half = 0.5 * length
+    cp, sp = np.cos(a + b) * half, np.sin(a + b) * half
+    dc_da, dc_db = -sp * sinc - cp * slope, -sp * sinc + cp * slope
+    dxz_da, dxz_db = -(cp * sinc - sp * slope), -(cp * sinc + sp * slope)
+    return np.stack([-dc_da, dxz_da, dc_da]), np.stack([-dc_db, dxz_db, dc_db])
 
 
 def shear_displacements(theta, lengths, segment, offset, force, compliance):
@@ -250,7 +294,8 @@ class CorrectedSolver(PCCSolver):
                             f'got {type(correction).__name__}')
         super().__init__(design, n_segments, pressure_model, **options)
         self.correction = correction
-        breaks, types, law = corrected_layout(design, correction)
+        breaks, types, law, self._factor_directions = corrected_layout(design,
+                                                                       correction)
         counts = share_segments(np.diff(breaks), max(int(n_segments), types.size))
         self.edges = np.concatenate([*(np.linspace(a, b, c + 1)[:-1]
                                        for a, b, c in zip(breaks, breaks[1:], counts)),
@@ -275,6 +320,52 @@ class CorrectedSolver(PCCSolver):
                                               self.gradient_scale)
         self._constants = finger_constants(self.rung, self.n_segments, self.edges)
         self._constants['model'] = f'pcc N={self.n_segments}, continuum-corrected'
+
+    def parameter_gradient(self, x, pressure, loads):
+        """
+        Differentiate the gradient in the engine unknowns by `PARAMETERS`, exactly.
+
+        `SECTION_PARAMETERS` as `PCCSolver.parameter_gradient`, then the three stiffness
+        factors: K is linear in each (`corrected_layout`'s directions D), so the section's
+        gradient moves by D y, mapped to the unknowns as the section law's rates are.
+
+        Returns
+        -------
+        ndarray, shape (11, 3 N)
+            [J per unit of each parameter].
+
+        """
+        paper = super().parameter_gradient(x, pressure, loads)
+        state = np.asarray(x, dtype=float).reshape(-1, 3)
+        theta = state[:, _THETA]
+        y = np.stack([state[:, 0], np.diff(theta, prepend=0.0) / self.lengths, state[:, 1]],
+                     axis=1)
+        rates = np.einsum('fnij,nj->fni', self._factor_directions[:, self.segment_types], y)
+        out = np.empty((3, self.n_segments, 3))
+        out[:, :, 0] = self.lengths * rates[:, :, 0]
+        out[:, :, 1] = self.lengths * rates[:, :, 2]
+        out[:, :, 2] = rates[:, :, 1]
+        out[:, :-1, 2] -= rates[:, 1:, 1]
+        return np.concatenate([paper, out.reshape(3, -1)])
+
+    def shear_tip(self, x, force):
+        """
+        Return the tip's shear move per unit compliance M(x) F [m N] and d(M F)/dx, (2, 3 N).
+
+        The tip moves by c M F, M = int_0^L n n^T ds (`shear_displacements`): linear in
+        the compliance c, and through the segments' angles in the unknowns.
+        """
+        force = np.asarray(force, dtype=float)
+        theta = np.asarray(x, dtype=float)[_THETA::3]
+        start = np.concatenate([[0.0], theta[:-1]])
+        xx, xz, zz = _moments(start, theta, self.lengths).sum(axis=1)
+        move = np.array([xx * force[0] + xz * force[1], xz * force[0] + zz * force[1]])
+        d_start, d_end = _moment_rates(start, theta, self.lengths)
+        d_end[:, :-1] += d_start[:, 1:]
+        jac = np.zeros((2, theta.size * 3))
+        jac[0, _THETA::3] = d_end[0] * force[0] + d_end[1] * force[1]
+        jac[1, _THETA::3] = d_end[1] * force[0] + d_end[2] * force[1]
+        return move, jac
 
     def _result(self, outcome, pressure, tip_force, point_loads=(), model_choice=None,
                 **level):

@@ -7,12 +7,14 @@ import numpy as np
 from numpy.testing import assert_allclose
 import pytest
 
-from fpc_gripper.calibration.continuum import correction_tips, fe_scenes, fit_correction
+from fpc_gripper.calibration.continuum import correction_tips, fe_scenes
 from fpc_gripper.model import ActuatorDesign
-from fpc_gripper.model.corrected import (CONTINUUM_FIT, ContinuumCorrection, CorrectedSolver,
-                                         PAPER_PHYSICS, shear_displacements)
+from fpc_gripper.model.corrected import (_moment_rates, _moments, CONTINUUM_FIT,
+                                         ContinuumCorrection, CorrectedSolver, PAPER_PHYSICS,
+                                         PARAMETERS, shear_displacements)
 from fpc_gripper.model.discretisations.pcc import PCCSolver
 from fpc_gripper.model.pipeline import finger_model, ModelSettings
+from fpc_gripper.model.section.materials import Material
 
 TABLE = pathlib.Path(__file__).resolve().parents[2] / 'bench' / 'results' / 'continuum.json'
 #: Largest tip distance to the FE the stored correction reaches on the unpressurised
@@ -100,8 +102,91 @@ def test_shear_displacement_against_quadrature():
     assert_allclose(got, expected, rtol=1e-7)
 
 
-def test_fit_from_the_paper_reproduces_the_stored_values(scenes):
-    fit = fit_correction(scenes)
-    assert fit.success
-    assert_allclose(fit.correction.values, CONTINUUM_FIT.values, rtol=0.02)
-    assert fit.errors.max() < TOLERANCE
+def _loaded_state(correction, force=(0.3, -0.4)):
+    solver = CorrectedSolver(ActuatorDesign.paper(prestrain=0.25), correction)
+    result = solver.solve(0.0, force, outputs='tip')
+    assert result.success
+    return solver, solver.unknowns(result), solver.tip_loads(np.asarray(force))
+
+
+@pytest.mark.parametrize('name', ['band_stiffness', 'clamp_stiffness',
+                                  'channel_end_stiffness'])
+def test_factor_gradients_against_finite_differences(name):
+    # d gradient / d factor at a fixed state, against a central difference of the
+    # gradient of solvers built with the factor moved (K is linear in it: exact to
+    # rounding).
+    correction = ContinuumCorrection(0.8, 1.4, 3.0, 0.02)
+    solver, x, loads = _loaded_state(correction)
+    rates = solver.parameter_gradient(x, 0.0, loads)
+    assert rates.shape == (len(PARAMETERS), x.size)
+    step = 1e-4
+
+    def gradient(value):
+        fields = dict(zip(('band_stiffness', 'clamp_stiffness', 'channel_end_stiffness',
+                           'shear_compliance'), correction.values))
+        fields[name] = value
+        moved = CorrectedSolver(solver.design, ContinuumCorrection(**fields))
+        return moved.derivatives(x, 0.0, loads)[1]
+
+    value = getattr(correction, name)
+    expected = (gradient(value + step) - gradient(value - step)) / (2 * step)
+    got = rates[PARAMETERS.index(name)]
+    assert_allclose(got, expected, atol=1e-7 * np.abs(expected).max())
+    assert np.abs(got).max() > 0.0
+
+
+def test_fl_modulus_gradient_carries_the_band_factor():
+    # The band is fluidic layer, so its factor scales part of the fl_modulus direction.
+    correction = ContinuumCorrection(0.6, 1.4, 3.0, 0.0)
+    solver, x, loads = _loaded_state(correction)
+    got = solver.parameter_gradient(x, 0.0, loads)[PARAMETERS.index('fl_modulus')]
+    fl = solver.design.fluidic_layer
+    step = 1e-4 * fl.E1
+
+    def gradient(modulus):
+        design = solver.design.replace(fluidic_layer=Material(
+            modulus, fl.E2 * modulus / fl.E1, fl.nu))
+        return CorrectedSolver(design, correction).derivatives(x, 0.0, loads)[1]
+
+    expected = (gradient(fl.E1 + step) - gradient(fl.E1 - step)) / (2 * step)
+    assert_allclose(got, expected, atol=1e-7 * np.abs(expected).max())
+
+
+def test_moment_rates_against_complex_step():
+    a = np.array([0.3, 0.3, -1.0, 0.0, 2.0])
+    b = np.array([0.3 + 1e-5, 1.2, -0.2, 1e-3, -1.0])
+    lengths = np.array([1.0, 2.0, 0.5, 1.0, 0.3])
+    h = 1e-30
+    d_a, d_b = _moment_rates(a, b, lengths)
+    # The complex step of sin(d) / d itself cancels digits at small d (1e-10 relative at
+    # d = 1e-3), hence the tolerance; the rates use the series there.
+    assert_allclose(d_a, _moments(a + 1j * h, b, lengths).imag / h, rtol=1e-9, atol=1e-14)
+    assert_allclose(d_b, _moments(a, b + 1j * h, lengths).imag / h, rtol=1e-9, atol=1e-14)
+
+
+def test_shear_tip_jacobian_against_finite_differences():
+    solver, x, _ = _loaded_state(CONTINUUM_FIT)
+    force = np.array([0.3, -0.4])
+    move, jac = solver.shear_tip(x, force)
+    step = 1e-7
+    expected = np.empty_like(jac)
+    for i in range(x.size):
+        e = np.zeros(x.size)
+        e[i] = step
+        expected[:, i] = (solver.shear_tip(x + e, force)[0]
+                          - solver.shear_tip(x - e, force)[0]) / (2 * step)
+    assert_allclose(jac, expected, atol=1e-8 * np.abs(expected).max())
+    # The move is the tip's shear term: the quadrature test's integral at the tip.
+    theta = x[2::3]
+    assert_allclose(move, shear_displacements(theta, solver.lengths, [theta.size - 1],
+                                              [solver.lengths[-1]], force, 1.0)[0],
+                    rtol=1e-12)
+
+
+def test_result_tip_is_the_rod_tip_plus_the_shear_move():
+    solver, x, _ = _loaded_state(CONTINUUM_FIT)
+    tip = solver.solve(0.0, (0.3, -0.4)).tip
+    move = solver.shear_tip(x, (0.3, -0.4))[0]
+    rod = solver.node_jacobian(x, solver.tip_node)[0]
+    assert_allclose(tip, rod + CONTINUUM_FIT.shear_compliance * move, atol=1e-12)
+    assert np.linalg.norm(CONTINUUM_FIT.shear_compliance * move) > 1e-4
