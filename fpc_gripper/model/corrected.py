@@ -196,8 +196,13 @@ def _moments(a, b, length):
     d = np.where(d == 0.0, 1e-300, d)
     half = 0.5 * length
     sinc = np.sin(d) / d * half
-    c = np.cos(a + b) * sinc
-    return np.stack([half - c, -np.sin(a + b) * sinc, half + c])
+    p = a + b
+    c = np.cos(p) * sinc
+    out = np.empty((3,) + c.shape, dtype=c.dtype)
+    np.subtract(half, c, out=out[0])
+    np.multiply(np.sin(p), -sinc, out=out[1])
+    np.add(half, c, out=out[2])
+    return out
 
 
 def _moment_rates(a, b, length):
@@ -309,6 +314,10 @@ class CorrectedSolver(PCCSolver):
         seg = np.clip(np.searchsorted(self.edges, s, side='right') - 1, 0, n - 1)
         self._sample_segment = seg.astype(np.int64)
         self._sample_offset = s - self.edges[seg]
+        # For the shear move: the samples' fraction of their segment, and the lengths of
+        # the parts it integrates over (the segments, then the samples' partial segments).
+        self._sample_fraction = self._sample_offset / self.lengths[seg]
+        self._moment_lengths = np.concatenate((self.lengths, self._sample_offset))
         self.gradient_scale = float(self.law.stiffness[:, 1, 1].max()) / self.length
         self._options = NewtonOptions(max_iterations=self.max_iterations, xtol=self.tol,
                                       max_step=np.tile(_CAP, n),
@@ -376,29 +385,31 @@ class CorrectedSolver(PCCSolver):
         if compliance == 0.0 or not force.any():
             return result
         fields = dict(result.__dict__)
-        x = result.x
-        theta = x[_THETA::3]
-        start = np.empty_like(theta)
-        start[0] = 0.0
-        start[1:] = theta[:-1]
-        parts = _moments(start, theta, self.lengths)
-        xx, xz, zz = parts.sum(axis=1)
-        fields['tip'] = result.tip + compliance * np.array(
-            [xx * force[0] + xz * force[1], xz * force[0] + zz * force[1]])
+        theta = result.x[_THETA::3]
         edges, lengths, n = self.edges, self.lengths, self.n_segments
-        if result.nodes is not None:
-            whole = np.zeros((3, n + 1))
-            np.cumsum(parts, axis=1, out=whole[:, 1:])
-            fields['nodes'] = result.nodes + compliance * np.stack(
-                [whole[0] * force[0] + whole[1] * force[1],
-                 whole[1] * force[0] + whole[2] * force[1]], axis=1)
-            seg, off = self._sample_segment, self._sample_offset
-            a = start[seg]
-            xx, xz, zz = whole[:, seg] + _moments(
-                a, a + (theta[seg] - a) * (off / lengths[seg]), off)
-            fields['points'] = result.points + compliance * np.stack(
-                [xx * force[0] + xz * force[1], xz * force[0] + zz * force[1]], axis=1)
-            curvature, rmsd = (float(v) for v in circle_fit(fields['points'])[:2])
+        # F^T as the map from (xx, xz, zz) to the move, times the compliance.
+        mix = compliance * np.array([[force[0], force[1], 0.0], [0.0, force[0], force[1]]])
+        if result.nodes is None:
+            fields['tip'] = result.tip + mix @ _moments(
+                np.concatenate(([0.0], theta[:-1])), theta, lengths).sum(axis=1)
+        else:
+            # One pass over the segments and the samples' partial segments together.
+            seg, rho = self._sample_segment, self._sample_fraction
+            start = np.zeros(n + seg.size)
+            start[1:n] = theta[:-1]
+            begin = start[seg]
+            start[n:] = begin
+            end = np.concatenate((theta, begin + (theta[seg] - begin) * rho))
+            parts = _moments(start, end, self._moment_lengths)
+            whole = np.zeros((3, n + 1 + seg.size))
+            np.cumsum(parts[:, :n], axis=1, out=whole[:, 1:n + 1])
+            whole[:, n + 1:] = whole[:, seg] + parts[:, n:]
+            moves = mix @ whole
+            fields['tip'] = result.tip + moves[:, n]
+            fields['nodes'] = result.nodes + moves[:, :n + 1].T
+            points = result.points + moves[:, n + 1:].T
+            fields['points'] = points
+            curvature, rmsd = (float(v) for v in circle_fit(points)[:2])
             fields['curvature'], fields['fit_rmsd'] = curvature, rmsd
         base = result.position_at
 
