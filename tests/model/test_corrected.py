@@ -190,3 +190,17 @@ def test_result_tip_is_the_rod_tip_plus_the_shear_move():
     rod = solver.node_jacobian(x, solver.tip_node)[0]
     assert_allclose(tip, rod + CONTINUUM_FIT.shear_compliance * move, atol=1e-12)
     assert np.linalg.norm(CONTINUUM_FIT.shear_compliance * move) > 1e-4
+
+
+def test_points_and_nodes_carry_the_same_shear_move_as_position_at():
+    # The samples' and nodes' moves (one pass in _result) against position_at's, which
+    # integrates each point on its own (shear_displacements).
+    solver = CorrectedSolver(ActuatorDesign.paper(prestrain=0.4), CONTINUUM_FIT)
+    result = solver.solve(0.0, (0.3, -0.4))
+    s = np.linspace(0.0, solver.length, solver.samples)
+    assert_allclose(result.points, result.position_at(s), atol=1e-12)
+    assert_allclose(result.nodes, result.position_at(solver.edges), atol=1e-12)
+    assert_allclose(result.nodes[-1], result.tip, atol=1e-12)
+    plain = CorrectedSolver(solver.design, ContinuumCorrection(
+        *CONTINUUM_FIT.values[:3])).solve(0.0, (0.3, -0.4))
+    assert np.abs(result.points - plain.points).max() > 1e-4
