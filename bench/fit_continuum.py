@@ -90,6 +90,7 @@ def main():
     out = {'meta': {'commit': commit, 'date': time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime()),
                     'machine': machine(), 'table_commit': table['table']['meta']['commit']},
            'fit': {'success': fit.success, 'message': fit.message, 'nfev': fit.nfev,
+                   'njev': fit.njev, 'jacobian': 'exact (engine.sensitivity, shear_tip)',
                    'start': 'paper physics (1, 1, 1, 0)',
                    'parameters': dict(zip(('band_stiffness', 'clamp_stiffness',
                                            'channel_end_stiffness', 'shear_compliance'),
