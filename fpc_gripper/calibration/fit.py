@@ -17,7 +17,7 @@ from ..model.pipeline import finger_model, ModelSettings
 from ..model.section.materials import emc_stress
 
 __all__ = ['calibrate', 'pcc_model', 'CalibrationResult', 'CalibrationStatus', 'FIT_SEGMENTS',
-           'DEFAULT_FIT', 'IDENTIFIABLE_RSE']
+           'DEFAULT_FIT', 'IDENTIFIABLE_RSE', 'least_squares_fit', 'solve_scene']
 
 #: Segments of the PCC the fit uses for every scene and every parameter value: one fixed
 #: discretisation, so that the objective is smooth and deterministic. Unloaded, the PCC
@@ -149,6 +149,78 @@ class _Scene:
     rates: np.ndarray = None
 
 
+def solve_scene(model, pressure, force, sensitivities):
+    """
+    Solve one force-controlled scene cold, and with `sensitivities` differentiate it.
+
+    Parameters
+    ----------
+    model : dict
+        {'solver': the fit's solver, 'scenes': its solved scenes by key} (memo).
+    pressure : float
+        [Pa].
+    force : array_like, shape (2,)
+        Tip force [N].
+    sensitivities : bool
+        Also d x / d parameters (the solver's `parameter_gradient` rows) by the implicit
+        function theorem (`engine.sensitivity`).
+
+    Returns
+    -------
+    _Scene
+
+    Raises
+    ------
+    _ModelFailure
+        Where the solver finds no equilibrium.
+
+    """
+    solver = model['solver']
+    key = ('solve', pressure, float(force[0]), float(force[1]))
+    scene = model['scenes'].get(key)
+    if scene is None:
+        result = solver.solve(pressure, force, outputs='tip')
+        if not result.success:
+            raise _ModelFailure(CalibrationStatus.MODEL_FAILED,
+                                f'no equilibrium at {pressure:g} Pa, tip force '
+                                f'{tuple(force)} N: {result.message}')
+        scene = model['scenes'][key] = _Scene(result, solver.unknowns(result),
+                                              solver.tip_loads(force))
+    if sensitivities and scene.rates is None:
+        scene.rates = engine.sensitivity(
+            solver.engine_problem, scene.x, pressure, scene.loads,
+            solver.parameter_gradient(scene.x, pressure, scene.loads))[0]
+    return scene
+
+
+def least_squares_fit(problem, u0, lower, upper, loss, max_nfev):
+    """
+    Run the calibration's one least-squares loop on a problem's residuals and exact Jacobian.
+
+    `scipy.optimize.least_squares`, trust-region reflective, bounded, with the tolerances
+    every fit uses.
+
+    Parameters
+    ----------
+    problem : object
+        With ``residuals(u)`` and ``jacobian(u)`` (exact).
+    u0, lower, upper : ndarray
+        Start and bounds, in the problem's scaled units.
+    loss : {'linear', 'soft_l1'}
+        'soft_l1' at one stated noise for measurements; 'linear' for noise-free data.
+    max_nfev : int
+        Largest number of residual evaluations.
+
+    Returns
+    -------
+    scipy.optimize.OptimizeResult
+
+    """
+    return least_squares(problem.residuals, u0, jac=problem.jacobian, bounds=(lower, upper),
+                         method='trf', loss=loss, f_scale=1.0, x_scale=1.0, xtol=1e-10,
+                         ftol=1e-10, gtol=1e-10, max_nfev=int(max_nfev))
+
+
 def pcc_model(design, n_segments):
     """Return the finger the fit models: the PCC with `n_segments`, from the finger pipeline."""
     return finger_model(design, ModelSettings(rung='pcc', n_segments=n_segments))
@@ -195,22 +267,7 @@ class _Problem:
 
     def _scene(self, model, pressure, force, sensitivities):
         """Solve (and differentiate) one force-controlled scene, cold."""
-        solver = model['solver']
-        key = ('solve', pressure, float(force[0]), float(force[1]))
-        scene = model['scenes'].get(key)
-        if scene is None:
-            result = solver.solve(pressure, force, outputs='tip')
-            if not result.success:
-                raise _ModelFailure(CalibrationStatus.MODEL_FAILED,
-                                    f'no equilibrium at {pressure:g} Pa, tip force '
-                                    f'{tuple(force)} N: {result.message}')
-            scene = model['scenes'][key] = _Scene(result, solver.unknowns(result),
-                                                  solver.tip_loads(force))
-        if sensitivities and scene.rates is None:
-            scene.rates = engine.sensitivity(
-                solver.engine_problem, scene.x, pressure, scene.loads,
-                solver.parameter_gradient(scene.x, pressure, scene.loads))[0]
-        return scene
+        return solve_scene(model, pressure, force, sensitivities)
 
     def _rigidity(self, model, pressure, axis, displacement, sensitivities):
         """Displacement-controlled force (and d force / d section parameters), cold."""
@@ -526,9 +583,7 @@ def calibrate(design, markers=None, loading=None, tensile=None, fit=DEFAULT_FIT,
     try:
         if problem.frames:
             u0[len(params):] = _initial_frame(problem, u0)
-        fitted = least_squares(problem.residuals, u0, jac=problem.jacobian, bounds=(lb, ub),
-                               method='trf', loss='soft_l1', f_scale=1.0, x_scale=1.0,
-                               xtol=1e-10, ftol=1e-10, gtol=1e-10, max_nfev=int(max_nfev))
+        fitted = least_squares_fit(problem, u0, lb, ub, 'soft_l1', max_nfev)
         u = fitted.x
         jac = problem.jacobian(u)
         predicted = problem.predict(problem.theta(u))

@@ -6,15 +6,20 @@ import math
 
 import numpy as np
 
+from .corrected import CONTINUUM_FIT, CorrectedSolver
 from .design import ActuatorDesign
 from .result import rung_label
 from .selection import AdaptiveSolver, make_solver, RUNGS
 from .validation import check_pressure_model
 
-__all__ = ['DEFAULT_TOLERANCE', 'DEFAULT_N_SEGMENTS', 'MAX_SEGMENTS', 'MAX_RUNG_SEGMENTS',
+__all__ = ['PHYSICS',
+           'DEFAULT_TOLERANCE', 'DEFAULT_N_SEGMENTS', 'MAX_SEGMENTS', 'MAX_RUNG_SEGMENTS',
            'ModelSettings', 'finger_model', 'contact_model', 'contact_segments', 'model_label',
            'rung_label', 'solver_label']
 
+#: The physics a finger can be modelled with: the paper's plane sections, or the fast rung
+#: corrected to the 2-D continuum (`corrected.CorrectedSolver`, docs/physics.md 18.1).
+PHYSICS = ('paper', 'continuum')
 #: Default tip-position tolerance against the geometrically exact rod [m].
 DEFAULT_TOLERANCE = 5e-5
 #: Segments of the fixed paper CCM that tolerance 0 selects.
@@ -45,6 +50,11 @@ class ModelSettings:
         'auto' (the default): the model `tolerance` selects, as above. A rung name fixes
         that rung with `n_segments` segments (the arc and the rod ignore N), whatever
         the tolerance: what calibration, contact and the benchmarks ask for.
+    physics : {'paper', 'continuum'}
+        'paper' (the default): the paper's plane-section physics, as above. 'continuum':
+        the fast rung corrected to the 2-D FE (`CorrectedSolver` with `CONTINUUM_FIT`, the
+        PCC with `corrected.CORRECTED_SEGMENTS` segments), whatever `tolerance`, `rung`
+        and `n_segments` say; fitted to unpressurised scenes only.
 
     """
 
@@ -52,8 +62,11 @@ class ModelSettings:
     n_segments: int = DEFAULT_N_SEGMENTS
     pressure_model: str = 'design'
     rung: str = 'auto'
+    physics: str = 'paper'
 
     def __post_init__(self):
+        if self.physics not in PHYSICS:
+            raise ValueError(f'`physics` must be one of {list(PHYSICS)}, got {self.physics!r}')
         tolerance = self.tolerance
         if isinstance(tolerance, bool) or not isinstance(tolerance, (int, float, np.integer,
                                                                      np.floating)):
@@ -107,6 +120,8 @@ def finger_model(design, settings=ModelSettings()):
         raise TypeError(f'`design` must be an ActuatorDesign, got {type(design).__name__}')
     if not isinstance(settings, ModelSettings):
         raise TypeError(f'`settings` must be a ModelSettings, got {type(settings).__name__}')
+    if settings.physics == 'continuum':
+        return CorrectedSolver(design, CONTINUUM_FIT, pressure_model=settings.pressure_model)
     fixed = settings.fixed
     if fixed is None:
         return AdaptiveSolver(design, tolerance=settings.tolerance,

@@ -1,0 +1,206 @@
+"""The continuum-corrected fast rung against the stored FE table, its parameters and its fit."""
+
+import json
+import pathlib
+
+import numpy as np
+from numpy.testing import assert_allclose
+import pytest
+
+from fpc_gripper.calibration.continuum import correction_tips, fe_scenes
+from fpc_gripper.model import ActuatorDesign
+from fpc_gripper.model.corrected import (_moment_rates, _moments, CONTINUUM_FIT,
+                                         ContinuumCorrection, CorrectedSolver, PAPER_PHYSICS,
+                                         PARAMETERS, shear_displacements)
+from fpc_gripper.model.discretisations.pcc import PCCSolver
+from fpc_gripper.model.pipeline import finger_model, ModelSettings
+from fpc_gripper.model.section.materials import Material
+
+TABLE = pathlib.Path(__file__).resolve().parents[2] / 'bench' / 'results' / 'continuum.json'
+#: Largest tip distance to the FE the stored correction reaches on the unpressurised
+#: scenes (0.188 mm, bench/results/continuum_fit.json), with a margin [m].
+TOLERANCE = 0.2e-3
+
+
+@pytest.fixture(scope='module')
+def scenes():
+    return fe_scenes(json.loads(TABLE.read_text()))
+
+
+def test_table_scenes_are_the_unpressurised_fifteen(scenes):
+    assert len(scenes) == 15
+    assert sorted({s.prestrain for s in scenes}) == [0.15, 0.25, 0.40]
+
+
+def test_corrected_rung_meets_the_fe(scenes):
+    # The FE tips are the table's (an independent 2-D FE), not this model's output.
+    tips = correction_tips(CONTINUUM_FIT, scenes)
+    errors = np.linalg.norm(tips - np.array([s.tip for s in scenes]), axis=1)
+    assert errors.max() < TOLERANCE
+
+
+def test_paper_physics_keeps_the_beam_floor(scenes):
+    # Without the correction the rung is the paper's PCC: 2.6 mm off at worst, as the rod.
+    errors = np.linalg.norm(correction_tips(PAPER_PHYSICS, scenes)
+                            - np.array([s.tip for s in scenes]), axis=1)
+    assert 2.4e-3 < errors.max() < 2.8e-3
+
+
+def test_paper_physics_is_the_pcc():
+    design = ActuatorDesign.paper(prestrain=0.4)
+    tip = CorrectedSolver(design, PAPER_PHYSICS).solve(0.0, (0.2, -0.3)).tip
+    assert_allclose(tip, PCCSolver(design, 32).solve(0.0, (0.2, -0.3)).tip, atol=2e-6)
+
+
+def test_off_by_default():
+    design = ActuatorDesign.paper()
+    assert ModelSettings().physics == 'paper'
+    assert not isinstance(finger_model(design), CorrectedSolver)
+    assert isinstance(finger_model(design, ModelSettings(physics='continuum')),
+                      CorrectedSolver)
+    with pytest.raises(ValueError, match='physics'):
+        ModelSettings(physics='fe')
+
+
+@pytest.mark.parametrize('field, value', [('band_stiffness', 0.0), ('clamp_stiffness', 50.0),
+                                          ('channel_end_stiffness', float('nan')),
+                                          ('shear_compliance', -0.01)])
+def test_bounds_refused(field, value):
+    with pytest.raises(ValueError, match=field):
+        ContinuumCorrection(**{field: value})
+
+
+def test_parameters_mean_what_they_say():
+    # A softer band curls the finger more; a stiffer clamp zone less; shear compliance
+    # moves a loaded tip along the force.
+    design = ActuatorDesign.paper()
+
+    def tip(**fields):
+        return CorrectedSolver(design, ContinuumCorrection(**fields)).solve(
+            0.0, (0.0, -0.5)).tip
+
+    def curl(**fields):
+        return CorrectedSolver(design, ContinuumCorrection(**fields)).solve().curvature
+
+    assert curl(band_stiffness=0.7) > curl() > curl(clamp_stiffness=2.0)
+    moved = tip(shear_compliance=0.02) - tip()
+    assert moved[1] < 0.0
+
+
+def test_shear_displacement_against_quadrature():
+    theta = np.array([-0.3, -0.7, -1.6])
+    lengths = np.array([0.02, 0.03, 0.04])
+    force = np.array([0.3, -0.4])
+    s = np.linspace(0.0, lengths.sum(), 40001)
+    edges = np.concatenate([[0.0], np.cumsum(lengths)])
+    seg = np.clip(np.searchsorted(edges, s, side='right') - 1, 0, 2)
+    start = np.concatenate([[0.0], theta[:-1]])
+    phi = start[seg] + (theta[seg] - start[seg]) * (s - edges[seg]) / lengths[seg]
+    normal = np.stack([-np.sin(phi), np.cos(phi)], axis=1)
+    expected = np.trapezoid((normal @ force)[:, None] * normal, s, axis=0)
+    got = shear_displacements(theta, lengths, [2], [lengths[2]], force, 1.0)[0]
+    assert_allclose(got, expected, rtol=1e-7)
+
+
+def _loaded_state(correction, force=(0.3, -0.4)):
+    solver = CorrectedSolver(ActuatorDesign.paper(prestrain=0.25), correction)
+    result = solver.solve(0.0, force, outputs='tip')
+    assert result.success
+    return solver, solver.unknowns(result), solver.tip_loads(np.asarray(force))
+
+
+@pytest.mark.parametrize('name', ['band_stiffness', 'clamp_stiffness',
+                                  'channel_end_stiffness'])
+def test_factor_gradients_against_finite_differences(name):
+    # d gradient / d factor at a fixed state, against a central difference of the
+    # gradient of solvers built with the factor moved (K is linear in it: exact to
+    # rounding).
+    correction = ContinuumCorrection(0.8, 1.4, 3.0, 0.02)
+    solver, x, loads = _loaded_state(correction)
+    rates = solver.parameter_gradient(x, 0.0, loads)
+    assert rates.shape == (len(PARAMETERS), x.size)
+    step = 1e-4
+
+    def gradient(value):
+        fields = dict(zip(('band_stiffness', 'clamp_stiffness', 'channel_end_stiffness',
+                           'shear_compliance'), correction.values))
+        fields[name] = value
+        moved = CorrectedSolver(solver.design, ContinuumCorrection(**fields))
+        return moved.derivatives(x, 0.0, loads)[1]
+
+    value = getattr(correction, name)
+    expected = (gradient(value + step) - gradient(value - step)) / (2 * step)
+    got = rates[PARAMETERS.index(name)]
+    assert_allclose(got, expected, atol=1e-7 * np.abs(expected).max())
+    assert np.abs(got).max() > 0.0
+
+
+def test_fl_modulus_gradient_carries_the_band_factor():
+    # The band is fluidic layer, so its factor scales part of the fl_modulus direction.
+    correction = ContinuumCorrection(0.6, 1.4, 3.0, 0.0)
+    solver, x, loads = _loaded_state(correction)
+    got = solver.parameter_gradient(x, 0.0, loads)[PARAMETERS.index('fl_modulus')]
+    fl = solver.design.fluidic_layer
+    step = 1e-4 * fl.E1
+
+    def gradient(modulus):
+        design = solver.design.replace(fluidic_layer=Material(
+            modulus, fl.E2 * modulus / fl.E1, fl.nu))
+        return CorrectedSolver(design, correction).derivatives(x, 0.0, loads)[1]
+
+    expected = (gradient(fl.E1 + step) - gradient(fl.E1 - step)) / (2 * step)
+    assert_allclose(got, expected, atol=1e-7 * np.abs(expected).max())
+
+
+def test_moment_rates_against_complex_step():
+    a = np.array([0.3, 0.3, -1.0, 0.0, 2.0])
+    b = np.array([0.3 + 1e-5, 1.2, -0.2, 1e-3, -1.0])
+    lengths = np.array([1.0, 2.0, 0.5, 1.0, 0.3])
+    h = 1e-30
+    d_a, d_b = _moment_rates(a, b, lengths)
+    # The complex step of sin(d) / d itself cancels digits at small d (1e-10 relative at
+    # d = 1e-3), hence the tolerance; the rates use the series there.
+    assert_allclose(d_a, _moments(a + 1j * h, b, lengths).imag / h, rtol=1e-9, atol=1e-14)
+    assert_allclose(d_b, _moments(a, b + 1j * h, lengths).imag / h, rtol=1e-9, atol=1e-14)
+
+
+def test_shear_tip_jacobian_against_finite_differences():
+    solver, x, _ = _loaded_state(CONTINUUM_FIT)
+    force = np.array([0.3, -0.4])
+    move, jac = solver.shear_tip(x, force)
+    step = 1e-7
+    expected = np.empty_like(jac)
+    for i in range(x.size):
+        e = np.zeros(x.size)
+        e[i] = step
+        expected[:, i] = (solver.shear_tip(x + e, force)[0]
+                          - solver.shear_tip(x - e, force)[0]) / (2 * step)
+    assert_allclose(jac, expected, atol=1e-8 * np.abs(expected).max())
+    # The move is the tip's shear term: the quadrature test's integral at the tip.
+    theta = x[2::3]
+    assert_allclose(move, shear_displacements(theta, solver.lengths, [theta.size - 1],
+                                              [solver.lengths[-1]], force, 1.0)[0],
+                    rtol=1e-12)
+
+
+def test_result_tip_is_the_rod_tip_plus_the_shear_move():
+    solver, x, _ = _loaded_state(CONTINUUM_FIT)
+    tip = solver.solve(0.0, (0.3, -0.4)).tip
+    move = solver.shear_tip(x, (0.3, -0.4))[0]
+    rod = solver.node_jacobian(x, solver.tip_node)[0]
+    assert_allclose(tip, rod + CONTINUUM_FIT.shear_compliance * move, atol=1e-12)
+    assert np.linalg.norm(CONTINUUM_FIT.shear_compliance * move) > 1e-4
+
+
+def test_points_and_nodes_carry_the_same_shear_move_as_position_at():
+    # The samples' and nodes' moves (one pass in _result) against position_at's, which
+    # integrates each point on its own (shear_displacements).
+    solver = CorrectedSolver(ActuatorDesign.paper(prestrain=0.4), CONTINUUM_FIT)
+    result = solver.solve(0.0, (0.3, -0.4))
+    s = np.linspace(0.0, solver.length, solver.samples)
+    assert_allclose(result.points, result.position_at(s), atol=1e-12)
+    assert_allclose(result.nodes, result.position_at(solver.edges), atol=1e-12)
+    assert_allclose(result.nodes[-1], result.tip, atol=1e-12)
+    plain = CorrectedSolver(solver.design, ContinuumCorrection(
+        *CONTINUUM_FIT.values[:3])).solve(0.0, (0.3, -0.4))
+    assert np.abs(result.points - plain.points).max() > 1e-4
