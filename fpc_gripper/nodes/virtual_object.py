@@ -21,6 +21,7 @@ from fpc_gripper.grasp.objects import make_object
 from fpc_gripper.grasp.objects import OBJECTS
 from fpc_gripper.io.config import default_gripper_config_path
 from fpc_gripper.io.config import load_gripper_config
+from fpc_gripper.nodes.guard import InputGuard
 from fpc_gripper.nodes.parameters import float_range
 from fpc_gripper.nodes.runner import run_node
 
@@ -92,10 +93,14 @@ class VirtualObjectNode(Node):
         self.residuals = collections.deque(maxlen=100000)
         self._pubs = tuple(self.create_publisher(WrenchStamped, f'{n}/tip_force', _RELIABLE)
                            for n in self._names)
+        # Raw through the guard, as every node's inputs: size-checked, decoded, and a
+        # payload that does not decode is logged, not dropped without a word.
+        self._guard = InputGuard()
         for i, name in enumerate(self._names):
-            self.create_subscription(FluidPressure, f'{name}/pressure',
-                                     functools.partial(self._on_pressure, i),
-                                     qos_profile_sensor_data)
+            self._guard.subscribe(self, FluidPressure, f'{name}/pressure',
+                                  qos_profile_sensor_data,
+                                  functools.partial(self._on_pressure, i),
+                                  functools.partial(self._on_refused, i))
             self.create_subscription(Path, f'{name}/shape', functools.partial(self._on_shape, i),
                                      _RELIABLE, raw=True)
         self.get_logger().info(
@@ -111,6 +116,11 @@ class VirtualObjectNode(Node):
     def arcs(self):
         """Latest contact arc (start, end) [m] of every finger, or None."""
         return [None if c is None else c.arc for c in self.contacts]
+
+    def _on_refused(self, index, check):
+        self.get_logger().warning(f'{self._names[index]}/pressure refused '
+                                  f'({check.rejection.value}): {check.detail}',
+                                  throttle_duration_sec=2.0)
 
     def _on_pressure(self, index, msg):
         gauge = msg.fluid_pressure - self.get_parameter('atmospheric_pressure').value

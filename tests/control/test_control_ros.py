@@ -449,6 +449,17 @@ def test_grasp_on_a_virtual_object_reaches_the_total_normal_force(rig):
     assert r.max_command() <= CONFIG.max_pressure
 
 
+def test_the_virtual_object_refuses_a_junk_pressure_and_goes_on(rig):
+    r = rig(virtual_object=0.040, object='cylinder', object_diameter=0.040)
+    name = FINGERS[0]
+    # A payload that is no FluidPressure: CDR's little-endian header, then 3 bytes.
+    r.pressure_pubs[name].publish(b'\x00\x01\x00\x00\xff\xff\xff')
+    r.advance_until(lambda: r.virtual._guard.refused >= 1, 1.0, 'the junk refused')
+    answered = len(r.tip_forces[name])
+    r.advance(0.2)
+    assert len(r.tip_forces[name]) > answered
+
+
 def test_a_bad_object_is_refused_naming_it(ros):
     context, _ = ros
     for bad, word in (('cone', 'object'), ('sphere', 'diameter')):
