@@ -6,11 +6,8 @@ import math
 import numpy as np
 
 from .discretisations.pcc import PCCSolver
-from .engine import CompiledProblem, NewtonOptions
-from .kernels import pcc as kernels
 from .kernels.circle import circle_fit
-from .kernels.pcc_section import section_arrays
-from .result import finger_constants, Result
+from .result import Result
 from .section.law import (_add_linear, _box_moments, SECTION_PARAMETERS, SectionLaw,
                           station_layout)
 from .section.segments import share_segments
@@ -27,8 +24,6 @@ CLAMP_ZONE = 3.0e-3
 CHANNEL_END_ZONE = 4.0e-3
 #: Segments of the corrected rung's PCC: the calibration's discretisation (FIT_SEGMENTS).
 CORRECTED_SEGMENTS = 32
-#: Step caps of the PCC (its own `_CAP`): 0.1 on (eps, c1), 0.5 rad on the angles.
-_CAP = np.array([0.1, 0.1, 0.5])
 #: Column of a segment's angle in the engine's unknowns (eps, c1, theta) per segment.
 _THETA = 2
 #: Parameters of `CorrectedSolver.parameter_gradient`: `SECTION_PARAMETERS`, then the
@@ -306,28 +301,11 @@ class CorrectedSolver(PCCSolver):
                                        for a, b, c in zip(breaks, breaks[1:], counts)),
                                      breaks[-1:]])
         self.segment_types, self.law = np.repeat(types, counts), law
-        # The rest as PCCSolver.__init__ builds it from its layout (kernels unchanged).
-        self.lengths = np.diff(self.edges)
-        self.n_segments = n = self.lengths.size
-        self._stiffness, self._gas, self._pemc = section_arrays(self.law, self.segment_types)
-        s = np.linspace(0.0, self.length, self.samples)
-        seg = np.clip(np.searchsorted(self.edges, s, side='right') - 1, 0, n - 1)
-        self._sample_segment = seg.astype(np.int64)
-        self._sample_offset = s - self.edges[seg]
+        self._set_layout()
         # For the shear move: the samples' fraction of their segment, and the lengths of
         # the parts it integrates over (the segments, then the samples' partial segments).
-        self._sample_fraction = self._sample_offset / self.lengths[seg]
+        self._sample_fraction = self._sample_offset / self.lengths[self._sample_segment]
         self._moment_lengths = np.concatenate((self.lengths, self._sample_offset))
-        self.gradient_scale = float(self.law.stiffness[:, 1, 1].max()) / self.length
-        self._options = NewtonOptions(max_iterations=self.max_iterations, xtol=self.tol,
-                                      max_step=np.tile(_CAP, n),
-                                      energy_scale=self.gradient_scale)
-        self._data = kernels.PCCData(self.lengths, self._stiffness, self._gas, self._pemc,
-                                     float(self.pressure_coefficient), self.gradient_scale,
-                                     self._sample_segment, self._sample_offset)
-        self.engine_problem = CompiledProblem(self._data, self._data, self.flat(),
-                                              self.gradient_scale)
-        self._constants = finger_constants(self.rung, self.n_segments, self.edges)
         self._constants['model'] = f'pcc N={self.n_segments}, continuum-corrected'
 
     def parameter_gradient(self, x, pressure, loads):
@@ -345,17 +323,9 @@ class CorrectedSolver(PCCSolver):
 
         """
         paper = super().parameter_gradient(x, pressure, loads)
-        state = np.asarray(x, dtype=float).reshape(-1, 3)
-        theta = state[:, _THETA]
-        y = np.stack([state[:, 0], np.diff(theta, prepend=0.0) / self.lengths, state[:, 1]],
-                     axis=1)
-        rates = np.einsum('fnij,nj->fni', self._factor_directions[:, self.segment_types], y)
-        out = np.empty((3, self.n_segments, 3))
-        out[:, :, 0] = self.lengths * rates[:, :, 0]
-        out[:, :, 1] = self.lengths * rates[:, :, 2]
-        out[:, :, 2] = rates[:, :, 1]
-        out[:, :-1, 2] -= rates[:, 1:, 1]
-        return np.concatenate([paper, out.reshape(3, -1)])
+        rates = np.einsum('fnij,nj->fni', self._factor_directions[:, self.segment_types],
+                          self._section_strains(x))
+        return np.concatenate([paper, self._to_unknowns(rates)])
 
     def shear_tip(self, x, force):
         """

@@ -197,6 +197,10 @@ class PCCSolver(RungSolver):
             raise ValueError(f'`n_segments` must be an integer >= 1, got {n_segments!r}')
         set_common(self, design, pressure_model, tol, samples, max_iterations)
         self.edges, self.segment_types, self.law = pcc_edges(design, n_segments)
+        self._set_layout()
+
+    def _set_layout(self):
+        """Build the kernel data of `edges`, `segment_types` and `law`, once per solver."""
         self.lengths = np.diff(self.edges)
         self.n_segments = self.lengths.size
         n = self.n_segments
@@ -316,17 +320,29 @@ class PCCSolver(RungSolver):
             [J per unit of each parameter].
 
         """
+        rates = self.law.parameter_gradients(self._section_strains(x), pressure,
+                                             self.segment_types)   # (N, 8, 3)
+        return self._to_unknowns(rates.transpose(1, 0, 2))
+
+    def _section_strains(self, x):
+        """Return each segment's section strains (eps, kappa, c1), (N, 3), of a state."""
         state = self._unpack(x)
-        theta = state[:, 0]
-        kappa = np.diff(theta, prepend=0.0) / self.lengths
-        y = np.stack([state[:, 1], kappa, state[:, 2]], axis=1)
-        rates = self.law.parameter_gradients(y, pressure, self.segment_types)   # (N, 8, 3)
-        out = np.empty((rates.shape[1], self.n_segments, 3))
-        out[:, :, 0] = (self.lengths[:, None] * rates[:, :, 0]).T
-        out[:, :, 1] = (self.lengths[:, None] * rates[:, :, 2]).T
-        out[:, :, 2] = rates[:, :, 1].T
-        out[:, :-1, 2] -= rates[1:, :, 1].T
-        return out.reshape(rates.shape[1], -1)
+        kappa = np.diff(state[:, 0], prepend=0.0) / self.lengths
+        return np.stack([state[:, 1], kappa, state[:, 2]], axis=1)
+
+    def _to_unknowns(self, rates):
+        """
+        Map rates of the section energy's gradient to the unknowns, (P, N, 3) -> (P, 3 N).
+
+        `rates` [p, i] = d(g_eps, g_kappa, g_c1)/d(parameter p) of segment i: L_i g_eps,
+        L_i g_c1 on (eps_i, c1_i) and +g_kappa, -g_kappa on (theta_i, theta_{i-1}).
+        """
+        out = np.empty((rates.shape[0], self.n_segments, 3))
+        out[:, :, 0] = self.lengths * rates[:, :, 0]
+        out[:, :, 1] = self.lengths * rates[:, :, 2]
+        out[:, :, 2] = rates[:, :, 1]
+        out[:, :-1, 2] -= rates[:, 1:, 1]
+        return out.reshape(rates.shape[0], -1)
 
     # -- face points (contact: docs/physics.md, section 15.2) -------------------
     def point_derivatives(self, x, pressure, loads, pseg, poff, pz, pforce):
