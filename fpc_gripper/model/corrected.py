@@ -1,7 +1,6 @@
 """The continuum-corrected fast rung: the PCC rod with effective parameters fitted to the FE."""
 
 from dataclasses import dataclass
-import math
 
 import numpy as np
 
@@ -11,6 +10,7 @@ from .result import Result
 from .section.law import (_add_linear, _box_moments, SECTION_PARAMETERS, SectionLaw,
                           station_layout)
 from .section.segments import share_segments
+from .validation import real_number
 
 __all__ = ['ContinuumCorrection', 'CorrectedSolver', 'PAPER_PHYSICS', 'CONTINUUM_FIT',
            'CLAMP_ZONE', 'CHANNEL_END_ZONE', 'CORRECTED_SEGMENTS', 'corrected_layout',
@@ -67,23 +67,14 @@ class ContinuumCorrection:
     shear_compliance: float = 0.0
 
     def __post_init__(self):
-        for name in ('band_stiffness', 'clamp_stiffness', 'channel_end_stiffness'):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, (int, float, np.integer,
-                                                                 np.floating)):
-                raise TypeError(f'`{name}` must be a real number [-], got {value!r}')
-            if not (math.isfinite(value) and FACTOR_BOUNDS[0] <= value <= FACTOR_BOUNDS[1]):
-                raise ValueError(f'`{name}` must be in [{FACTOR_BOUNDS[0]}, '
-                                 f'{FACTOR_BOUNDS[1]}] [-], got {value}')
-            object.__setattr__(self, name, float(value))
-        value = self.shear_compliance
-        if isinstance(value, bool) or not isinstance(value, (int, float, np.integer,
-                                                             np.floating)):
-            raise TypeError(f'`shear_compliance` must be a real number [1/N], got {value!r}')
-        if not (math.isfinite(value) and COMPLIANCE_BOUNDS[0] <= value <= COMPLIANCE_BOUNDS[1]):
-            raise ValueError(f'`shear_compliance` must be in [{COMPLIANCE_BOUNDS[0]}, '
-                             f'{COMPLIANCE_BOUNDS[1]}] [1/N], got {value}')
-        object.__setattr__(self, 'shear_compliance', float(value))
+        for name, unit, (low, high) in (('band_stiffness', '[-]', FACTOR_BOUNDS),
+                                        ('clamp_stiffness', '[-]', FACTOR_BOUNDS),
+                                        ('channel_end_stiffness', '[-]', FACTOR_BOUNDS),
+                                        ('shear_compliance', '[1/N]', COMPLIANCE_BOUNDS)):
+            value = real_number(name, getattr(self, name), unit)
+            if not low <= value <= high:
+                raise ValueError(f'`{name}` must be in [{low}, {high}] {unit}, got {value}')
+            object.__setattr__(self, name, value)
 
     @property
     def values(self):
