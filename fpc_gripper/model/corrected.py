@@ -283,21 +283,23 @@ class CorrectedSolver(PCCSolver):
         if not isinstance(correction, ContinuumCorrection):
             raise TypeError(f'`correction` must be a ContinuumCorrection, '
                             f'got {type(correction).__name__}')
-        super().__init__(design, n_segments, pressure_model, **options)
         self.correction = correction
-        breaks, types, law, self._factor_directions = corrected_layout(design,
-                                                                       correction)
-        counts = share_segments(np.diff(breaks), max(int(n_segments), types.size))
-        self.edges = np.concatenate([*(np.linspace(a, b, c + 1)[:-1]
-                                       for a, b, c in zip(breaks, breaks[1:], counts)),
-                                     breaks[-1:]])
-        self.segment_types, self.law = np.repeat(types, counts), law
-        self._set_layout()
+        super().__init__(design, n_segments, pressure_model, **options)
         # For the shear move: the samples' fraction of their segment, and the lengths of
         # the parts it integrates over (the segments, then the samples' partial segments).
         self._sample_fraction = self._sample_offset / self.lengths[self._sample_segment]
         self._moment_lengths = np.concatenate((self.lengths, self._sample_offset))
         self._constants['model'] = f'pcc N={self.n_segments}, continuum-corrected'
+
+    def _layout(self, design, n_segments):
+        """Return `corrected_layout`'s intervals cut into about `n_segments` segments."""
+        breaks, types, law, self._factor_directions = corrected_layout(design,
+                                                                       self.correction)
+        counts = share_segments(np.diff(breaks), max(int(n_segments), types.size))
+        edges = np.concatenate([*(np.linspace(a, b, c + 1)[:-1]
+                                  for a, b, c in zip(breaks, breaks[1:], counts)),
+                                breaks[-1:]])
+        return edges, np.repeat(types, counts), law
 
     def parameter_gradient(self, x, pressure, loads):
         """

@@ -196,11 +196,7 @@ class PCCSolver(RungSolver):
                 or n_segments < 1:
             raise ValueError(f'`n_segments` must be an integer >= 1, got {n_segments!r}')
         set_common(self, design, pressure_model, tol, samples, max_iterations)
-        self.edges, self.segment_types, self.law = pcc_edges(design, n_segments)
-        self._set_layout()
-
-    def _set_layout(self):
-        """Build the kernel data of `edges`, `segment_types` and `law`, once per solver."""
+        self.edges, self.segment_types, self.law = self._layout(design, n_segments)
         self.lengths = np.diff(self.edges)
         self.n_segments = self.lengths.size
         n = self.n_segments
@@ -224,6 +220,10 @@ class PCCSolver(RungSolver):
         self.engine_problem = CompiledProblem(self._data, self._data, self.flat(),
                                               self.gradient_scale)
         self._constants = finger_constants(self.rung, self.n_segments, self.edges)
+
+    def _layout(self, design, n_segments):
+        """Return the segment edges [m], their section types and the section law."""
+        return pcc_edges(design, n_segments)
 
     def _flat_state(self):
         return np.zeros((self.n_segments, 3))
