@@ -370,10 +370,11 @@ class CorrectedSolver(PCCSolver):
             moves = mix @ whole
             fields['tip'] = result.tip + moves[:, n]
             fields['nodes'] = result.nodes + moves[:, :n + 1].T
-            points = result.points + moves[:, n + 1:].T
-            fields['points'] = points
-            curvature, rmsd = (float(v) for v in circle_fit(points)[:2])
-            fields['curvature'], fields['fit_rmsd'] = curvature, rmsd
+            fields['points'] = result.points + moves[:, n + 1:].T
+            if result.curvature is not None:
+                # The circle of the moved samples; only where the fit was asked for ('all').
+                fields['curvature'], fields['fit_rmsd'] = (
+                    float(v) for v in circle_fit(fields['points'])[:2])
         base = result.position_at
 
         def position_at(s):

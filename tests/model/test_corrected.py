@@ -204,3 +204,12 @@ def test_points_and_nodes_carry_the_same_shear_move_as_position_at():
     plain = CorrectedSolver(solver.design, ContinuumCorrection(
         *CONTINUUM_FIT.values[:3])).solve(0.0, (0.3, -0.4))
     assert np.abs(result.points - plain.points).max() > 1e-4
+
+
+def test_outputs_not_asked_for_stay_none_with_a_tip_load():
+    solver = CorrectedSolver(ActuatorDesign.paper(prestrain=0.25), CONTINUUM_FIT)
+    shape = solver.solve(0.0, (0.3, -0.4), outputs='shape')
+    full = solver.solve(0.0, (0.3, -0.4))
+    assert shape.curvature is None and shape.fit_rmsd is None
+    assert_allclose(shape.points, full.points, atol=1e-15)
+    assert full.curvature is not None and np.isfinite(full.curvature)
