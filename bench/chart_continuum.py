@@ -35,6 +35,7 @@ _HERE = pathlib.Path(__file__).resolve().parent
 sys.path.insert(0, str(_HERE))
 from timing import machine  # noqa: E402, I100
 
+from fpc_gripper.calibration.continuum import fe_scenes  # noqa: E402
 from fpc_gripper.model import ActuatorDesign  # noqa: E402
 from fpc_gripper.model.pipeline import finger_model, ModelSettings  # noqa: E402
 from fpc_gripper.model.reference import CONTINUUM_FLOOR  # noqa: E402
@@ -58,11 +59,9 @@ MODELS = (
 )
 
 
-def reference_rows(table=TABLE):
-    """Return the table's converged unpressurised scenes: (prestrain, force, FE tip [m])."""
-    rows = json.loads(pathlib.Path(table).read_text())['table']['rows']
-    return [(row['prestrain'], tuple(row['tip_force']), np.array(row['tip_mm']) * 1e-3)
-            for row in rows if row['pressure_kpa'] == 0.0 and row['success']]
+def _scenes():
+    """Return the table's converged unpressurised scenes (`calibration.continuum.fe_scenes`)."""
+    return fe_scenes(json.loads(TABLE.read_text()))
 
 
 def _warm_time(solver, force, repeats):
@@ -83,7 +82,8 @@ def measure(repeats):
     """Return one row per scene and rung: tips, distances to the FE and the rod, time."""
     out = []
     designs = {}
-    for scene, (prestrain, force, fe_tip) in enumerate(reference_rows()):
+    for scene, fe in enumerate(_scenes()):
+        prestrain, force, fe_tip = fe.prestrain, fe.tip_force, fe.tip
         design = designs.setdefault(prestrain, ActuatorDesign.paper(prestrain=prestrain))
         rod_tip = finger_model(design, ModelSettings(rung='rod')).solve(
             pressure=0.0, tip_force=force).tip
@@ -166,7 +166,7 @@ def main(argv=None):
     plot(summary, docs / 'speed_accuracy_continuum.png')
     RESULTS.write_text(json.dumps({
         'machine': machine(), 'elapsed_s': time.perf_counter() - start,
-        'repeats': args.repeats, 'scenes': len(reference_rows()),
+        'repeats': args.repeats, 'scenes': len(_scenes()),
         'references': {'fe': 'ContinuumSolver, h = 1 mm, ribs exact (continuum.json table)',
                        'rod': "finger_model(ModelSettings(rung='rod'))"},
         'timing': 'median over scenes of the median over repeats of the best of 5 warm '

@@ -1,5 +1,6 @@
 """Fit the continuum correction to the FE reference table, taking the FE tips as measurements."""
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -12,9 +13,8 @@ from ..model.design import ActuatorDesign
 __all__ = ['CORRECTION_NAMES', 'CORRECTION_UNITS', 'FEScene', 'fe_scenes', 'correction_tips',
            'fit_correction', 'CorrectionFit', 'rounded']
 
-#: The fitted names, `ContinuumCorrection` field order.
-CORRECTION_NAMES = ('band_stiffness', 'clamp_stiffness', 'channel_end_stiffness',
-                    'shear_compliance')
+#: The fitted names: `ContinuumCorrection`'s fields, in order.
+CORRECTION_NAMES = tuple(field.name for field in dataclasses.fields(ContinuumCorrection))
 CORRECTION_UNITS = {'band_stiffness': '-', 'clamp_stiffness': '-',
                     'channel_end_stiffness': '-', 'shear_compliance': '1/N'}
 #: Typical size of each parameter: the fit works in value / scale.

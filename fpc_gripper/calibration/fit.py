@@ -265,10 +265,6 @@ class _Problem:
             self._memo = (key, {'solver': pcc_model(design, self.n_segments), 'scenes': {}})
         return self._memo[1]
 
-    def _scene(self, model, pressure, force, sensitivities):
-        """Solve (and differentiate) one force-controlled scene, cold."""
-        return solve_scene(model, pressure, force, sensitivities)
-
     def _rigidity(self, model, pressure, axis, displacement, sensitivities):
         """Displacement-controlled force (and d force / d section parameters), cold."""
         solver = model['solver']
@@ -285,7 +281,7 @@ class _Problem:
                                                     result.force * AXES[axis])])
         if sensitivities and scene.rates is None:
             # The target e . tip(unloaded) + delta moves with the unloaded state.
-            free = self._scene(model, pressure, (0.0, 0.0), True)
+            free = solve_scene(model, pressure, (0.0, 0.0), True)
             tip = solver.tip_node
             direction = AXES[axis]
             along = np.tensordot(direction, solver.node_jacobian(free.x, tip)[1], axes=1)
@@ -314,7 +310,7 @@ class _Problem:
             points = np.empty((data.s.size, 2))
             slopes = np.empty((data.s.size, 2, rows.size))
             for f in range(data.pressure.size):
-                scene = self._scene(model, float(data.pressure[f]), data.tip_force[f],
+                scene = solve_scene(model, float(data.pressure[f]), data.tip_force[f],
                                     sensitivities)
                 where = np.flatnonzero(data.frame == f)
                 points[where], jac = model['solver'].material_jacobian(scene.x, data.s[where])
