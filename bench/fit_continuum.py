@@ -30,8 +30,8 @@ _HERE = pathlib.Path(__file__).resolve().parent
 sys.path.insert(0, str(_HERE))
 from timing import machine, median_time  # noqa: E402, I100
 
-from fpc_gripper.calibration.continuum import (correction_tips, fe_scenes,  # noqa: E402
-                                               fit_correction)
+from fpc_gripper.calibration.continuum import (CORRECTION_NAMES,  # noqa: E402
+                                               correction_tips, fe_scenes, fit_correction)
 from fpc_gripper.model import ActuatorDesign  # noqa: E402
 from fpc_gripper.model.corrected import CONTINUUM_FIT  # noqa: E402
 from fpc_gripper.model.pipeline import finger_model, ModelSettings  # noqa: E402
@@ -92,14 +92,11 @@ def main():
            'fit': {'success': fit.success, 'message': fit.message, 'nfev': fit.nfev,
                    'njev': fit.njev, 'jacobian': 'exact (engine.sensitivity, shear_tip)',
                    'start': 'paper physics (1, 1, 1, 0)',
-                   'parameters': dict(zip(('band_stiffness', 'clamp_stiffness',
-                                           'channel_end_stiffness', 'shear_compliance'),
+                   'parameters': dict(zip(CORRECTION_NAMES,
                                           fit.correction.values.tolist())),
                    'max_error_mm': float(fit.errors.max() * 1e3),
                    'rms_error_mm': float(np.sqrt(np.mean(fit.errors ** 2)) * 1e3)},
-           'stored': {'parameters': dict(zip(('band_stiffness', 'clamp_stiffness',
-                                              'channel_end_stiffness', 'shear_compliance'),
-                                             CONTINUUM_FIT.values.tolist())),
+           'stored': {'parameters': dict(zip(CORRECTION_NAMES, CONTINUUM_FIT.values.tolist())),
                       'max_error_mm': float(stored.max() * 1e3)},
            'rod_max_error_mm': float(rod.max() * 1e3),
            'per_prestrain': summary, 'scenes': per_scene, 'cost': _timing()}
