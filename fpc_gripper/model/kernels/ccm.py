@@ -18,11 +18,8 @@ __all__ = ['segment_energy', 'segment_derivatives', 'segment_energy_kernel',
 
 # Built at install (`compiled`), once per argument types; nogil lets a caller thread them.
 _jit = jit
-# Columns of the PEMC products (1, phi_a, phi_a phi_b) take F, sigma and sigma' in turn
-# (as energy._PRODUCT_LAW), and the (a, b) of phi_a phi_b at products[..., 4 + k].
-_PRODUCT_LAW = (0, 1, 1, 1, 2, 2, 2, 2, 2, 2)
-_PAIR_A = (0, 0, 0, 1, 1, 2)
-_PAIR_B = (0, 1, 2, 1, 2, 2)
+# The ten columns of the PEMC products are (1, phi_0, phi_1, phi_2, then phi_a phi_b for
+# (a, b) = (0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)); they take F, sigma and sigma'.
 
 
 @functools.lru_cache(maxsize=16)
@@ -39,12 +36,23 @@ def _law_matrix(emc):
 
 # -- segments -----------------------------------------------------------------------------
 @_jit
-def _horner5(law, column, s):
-    """Column `column` of the PEMC law at strain s: sum_k law[k, column] s^k, k = 0..5."""
-    acc = law[5, column]
-    for k in range(4, -1, -1):
-        acc = acc * s + law[k, column]
-    return acc
+def _density(law, s):
+    """The PEMC energy density F at strain s (column 0 of `_law_matrix`), by Horner."""
+    # F has no constant or linear term (`_law_matrix`): skipping those exact zeros leaves
+    # the value bit-identical to the full quintic and saves work in the quadrature loops.
+    return (((law[5, 0] * s + law[4, 0]) * s + law[3, 0]) * s + law[2, 0]) * s * s
+
+
+@_jit
+def _stress(law, s):
+    """The PEMC stress sigma = F' at strain s (column 1 of `_law_matrix`), by Horner."""
+    return (((law[4, 1] * s + law[3, 1]) * s + law[2, 1]) * s + law[1, 1]) * s
+
+
+@_jit
+def _tangent(law, s):
+    """The PEMC tangent sigma' at strain s (column 2 of `_law_matrix`, a cubic), by Horner."""
+    return ((law[3, 2] * s + law[2, 2]) * s + law[1, 2]) * s + law[0, 2]
 
 
 @_jit
@@ -82,6 +90,32 @@ def _chain_rule(g, h, jac, work, grad, hess):
             for c in range(4):
                 acc += jac[c, a] * work[c, b]
             hess[a, b] = acc
+
+
+@_jit
+def _strain_chain_rule(g, h, q3, work, grad, hess):
+    """
+    `_chain_rule` for y(q) = (q0, 3 q1 + 2 q3^2, q3, q2), plus its curvature 4 g1 at (3, 3).
+
+    The Jacobian is a permutation but for 3 and dB'/dq3 = 4 q3: written out, the products
+    skip its exact zeros and ones, so grad and hess are bit-identical to `_chain_rule`'s.
+    """
+    slope = 4.0 * q3
+    grad[0] = g[0]
+    grad[1] = g[1] * 3.0
+    grad[2] = g[3]
+    grad[3] = g[1] * slope + g[2]
+    for a in range(4):
+        work[a, 0] = h[a, 0]
+        work[a, 1] = h[a, 1] * 3.0
+        work[a, 2] = h[a, 3]
+        work[a, 3] = h[a, 1] * slope + h[a, 2]
+    for b in range(4):
+        hess[0, b] = work[0, b]
+        hess[1, b] = 3.0 * work[1, b]
+        hess[2, b] = work[3, b]
+        hess[3, b] = slope * work[1, b] + work[2, b]
+    hess[3, 3] += 4.0 * g[1]
 
 
 @_jit
@@ -129,7 +163,7 @@ def segment_energy_kernel(q, stiffness, gas_volume, gas_moments, pemc_basis, pem
         pemc = 0.0
         for p in range(points):
             s = _pemc_strain(pemc_basis, i, p, y, prestrain)
-            pemc += pemc_weights[i, p] * _horner5(law, 0, s)
+            pemc += pemc_weights[i, p] * _density(law, s)
         # Pi_P = -c (1 + C)(V0 + g . y3): the gas volume is bilinear in (y3, C). Grouped as
         # in `segment_derivatives_kernel`, so that the line search compares equal energies.
         lin_gas = gas_volume[i] + (gas_moments[i, 0] * y[0] + gas_moments[i, 1] * y[1]
@@ -158,17 +192,11 @@ def segment_derivatives_kernel(q, stiffness, gas_volume, gas_moments, pemc_basis
     n = q.shape[0]
     points = pemc_basis.shape[1]
     energy = np.empty(n)
-    grad = np.zeros((n, 4))
-    hess = np.zeros((n, 4, 4))
+    grad = np.empty((n, 4))
+    hess = np.empty((n, 4, 4))
     y = np.empty(4)
     g_y = np.empty(4)
     h_y = np.empty((4, 4))
-    # d(A, B', D', C)/dq: constant but for dB'/dq3 = 4 q3.
-    jac = np.zeros((4, 4))
-    jac[0, 0] = 1.0
-    jac[1, 1] = 3.0
-    jac[2, 3] = 1.0
-    jac[3, 2] = 1.0
     m = np.empty((4, 4))
     for i in range(n):
         _strain_unknowns(q, i, y)
@@ -176,10 +204,10 @@ def segment_derivatives_kernel(q, stiffness, gas_volume, gas_moments, pemc_basis
         p0 = p1 = p2 = p3 = p4 = p5 = p6 = p7 = p8 = p9 = 0.0
         for p in range(points):
             s = _pemc_strain(pemc_basis, i, p, y, prestrain)
-            density = _horner5(law, 0, s)
-            stress = _horner5(law, 1, s)
-            tangent = _horner5(law, 2, s)
-            # The (1, phi_a, phi_a phi_b) products take F, sigma and sigma' (_PRODUCT_LAW).
+            density = _density(law, s)
+            stress = _stress(law, s)
+            tangent = _tangent(law, s)
+            # The (1, phi_a, phi_a phi_b) products take F, sigma and sigma' in turn.
             p0 += density * pemc_products[i, p, 0]
             p1 += stress * pemc_products[i, p, 1]
             p2 += stress * pemc_products[i, p, 2]
@@ -190,7 +218,6 @@ def segment_derivatives_kernel(q, stiffness, gas_volume, gas_moments, pemc_basis
             p7 += tangent * pemc_products[i, p, 7]
             p8 += tangent * pemc_products[i, p, 8]
             p9 += tangent * pemc_products[i, p, 9]
-        pemc = (p0, p1, p2, p3, p4, p5, p6, p7, p8, p9)
         quadratic = 0.0
         for a in range(4):
             ky = 0.0
@@ -201,25 +228,28 @@ def segment_derivatives_kernel(q, stiffness, gas_volume, gas_moments, pemc_basis
         lin_gas = gas_volume[i] + (gas_moments[i, 0] * y[0] + gas_moments[i, 1] * y[1]
                                    + gas_moments[i, 2] * y[2])
         work = pressure_work * (1.0 + y[3])
-        energy[i] = 0.5 * quadratic + pemc[0] - work * lin_gas
-        for a in range(3):
-            g_y[a] += pemc[1 + a] - work * gas_moments[i, a]
+        energy[i] = 0.5 * quadratic + p0 - work * lin_gas
+        g_y[0] += p1 - work * gas_moments[i, 0]
+        g_y[1] += p2 - work * gas_moments[i, 1]
+        g_y[2] += p3 - work * gas_moments[i, 2]
         g_y[3] -= pressure_work * lin_gas
         for a in range(4):
             for b in range(4):
                 h_y[a, b] = stiffness[i, a, b]
-        for k in range(6):
-            a, b = _PAIR_A[k], _PAIR_B[k]
-            h_y[a, b] += pemc[4 + k]
-            if a != b:
-                h_y[b, a] += pemc[4 + k]
+        # The phi_a phi_b sums at their (a, b), in both triangles.
+        h_y[0, 0] += p4
+        h_y[0, 1] += p5
+        h_y[1, 0] += p5
+        h_y[0, 2] += p6
+        h_y[2, 0] += p6
+        h_y[1, 1] += p7
+        h_y[1, 2] += p8
+        h_y[2, 1] += p8
+        h_y[2, 2] += p9
         for a in range(3):
             h_y[a, 3] -= pressure_work * gas_moments[i, a]
             h_y[3, a] -= pressure_work * gas_moments[i, a]
-        # Chain rule y(q): A = q0, B' = 3 q1 + 2 q3^2, D' = q3, C = q2.
-        jac[1, 3] = 4.0 * q[i, 3]
-        _chain_rule(g_y, h_y, jac, m, grad[i], hess[i])
-        hess[i, 3, 3] += 4.0 * g_y[1]
+        _strain_chain_rule(g_y, h_y, q[i, 3], m, grad[i], hess[i])
     return energy, grad, hess
 
 
