@@ -262,3 +262,17 @@ def test_node_jacobian_is_the_derivative_of_the_node_position(states):
             assert np.abs(jac.reshape(2, -1) - numeric).max() <= 1e-7 * scale
             # Segments at and beyond the node do not move it.
             assert not jac[:, node:, :].any()
+
+
+def test_block_step_at_a_zero_pivot_mirrors_every_block():
+    # One block of eight has a zero pivot: the lockstep factorisation must stop before
+    # dividing by it, and every block then takes the mirrored-eigenvalue step.
+    rng = np.random.default_rng(3)
+    a = rng.normal(size=(8, 4, 4))
+    hess = a @ a.transpose(0, 2, 1) + np.eye(4)
+    hess[5, 0, :] = hess[5, :, 0] = 0.0
+    grad = rng.normal(size=(8, 4))
+    step, min_eig = linear.newton_step(grad, hess)
+    want, want_eig = reference.newton_step(grad, hess)
+    assert want_eig < 1.0 and min_eig == pytest.approx(want_eig, rel=0, abs=1e-12)
+    assert deviation(step, want) <= 1e-9

@@ -17,24 +17,55 @@ EIGEN_FLOOR = 1e-8
 
 # -- the CCM: blocks or one dense matrix -----------------------------------------------------
 @_jit
-def _cholesky_factor(a, low):
+def _block_cholesky_steps(grad, hess, step):
     """
-    Cholesky factor of the lower triangle of a into low; False if a is not PD.
+    Solve every block's H_i x_i = -g_i into step[i] by Cholesky; False if one is not PD.
 
-    As LAPACK potrf (OpenBLAS) it fails on a pivot <= 0 only: NaN propagates.
+    Each block's arithmetic is `_cholesky_substitute`'s and potrf's, in the same order,
+    so the step is bit-identical to solving the blocks one at a time. The blocks run in
+    lockstep (the innermost loops over the blocks): their square roots and divisions
+    overlap, where one block at a time waits on each. As LAPACK potrf (OpenBLAS) it fails
+    on a pivot <= 0 only: NaN propagates.
     """
-    n = a.shape[0]
-    for i in range(n):
+    n, m = grad.shape
+    low = np.empty((m, m, n))
+    acc = np.empty(n)
+    for i in range(m):
         for j in range(i + 1):
-            acc = a[i, j]
+            for b in range(n):
+                acc[b] = hess[b, i, j]
             for k in range(j):
-                acc -= low[i, k] * low[j, k]
+                for b in range(n):
+                    acc[b] -= low[i, k, b] * low[j, k, b]
             if i == j:
-                if acc <= 0.0:
-                    return False
-                low[i, i] = math.sqrt(acc)
+                for b in range(n):
+                    if acc[b] <= 0.0:
+                        return False
+                for b in range(n):
+                    low[i, i, b] = math.sqrt(acc[b])
             else:
-                low[i, j] = acc / low[j, j]
+                for b in range(n):
+                    low[i, j, b] = acc[b] / low[j, j, b]
+    out = np.empty((m, n))
+    for i in range(m):
+        for b in range(n):
+            acc[b] = -grad[b, i]
+        for k in range(i):
+            for b in range(n):
+                acc[b] -= low[i, k, b] * out[k, b]
+        for b in range(n):
+            out[i, b] = acc[b] / low[i, i, b]
+    for i in range(m - 1, -1, -1):
+        for b in range(n):
+            acc[b] = out[i, b]
+        for k in range(i + 1, m):
+            for b in range(n):
+                acc[b] -= low[k, i, b] * out[k, b]
+        for b in range(n):
+            out[i, b] = acc[b] / low[i, i, b]
+    for b in range(n):
+        for i in range(m):
+            step[b, i] = out[i, b]
     return True
 
 
@@ -102,20 +133,10 @@ def newton_step_blocks(grad, hess, floor):
     """
     n, m = grad.shape
     step = np.empty((n, m))
-    low = np.empty((m, m))
+    if _block_cholesky_steps(grad, hess, step):
+        return step, 1.0
     rhs = np.empty(m)
     out = np.empty(m)
-    definite = True
-    for i in range(n):
-        for a in range(m):
-            rhs[a] = -grad[i, a]
-        if not _cholesky_factor(hess[i], low):
-            definite = False
-            break
-        _cholesky_substitute(low, rhs, out)
-        step[i] = out
-    if definite:
-        return step, 1.0
     min_eig = np.inf
     for i in range(n):
         lam, vec = np.linalg.eigh(hess[i])
