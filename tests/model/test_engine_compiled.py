@@ -476,3 +476,38 @@ def test_register_names_a_missing_or_unknown_hook():
         engine.register(fake, hooks)
     with pytest.raises(KeyError):
         engine.hooks_of(fake)                   # neither attempt registered it
+
+
+@pytest.mark.parametrize('make', [lambda d: CCMSolver(d, 8), lambda d: PCCSolver(d, 22)],
+                         ids=['ccm8', 'pcc22'])
+def test_undispatched_solves_equal_dispatched_ones(make):
+    # After a frame's first solve, `engine.solve` calls the compiled overload directly:
+    # bit-for-bit what numba's dispatcher gives, warm and cold, loaded and unloaded.
+    from fpc_gripper.model.engine import solves
+    solver = make(ActuatorDesign.paper(0.25))
+    problem, options = solver.engine_problem, solver._options
+    base = engine.solve(problem, 50e3, [], options)
+    tip = solver.n_segments
+    scenes = [(60e3, [], base.x), (0.0, [], None), (80e3, [(tip, np.array([0.1, 0.2]))], None),
+              (90e3, [(tip, np.array([0.0, 0.3]))], base.x)]
+    for pressure, loads, initial in scenes:
+        for _ in range(2):
+            direct = engine.solve(problem, pressure, loads, options, initial, engine.ALL)
+        frame = solves._frame(problem, options, bool(loads))
+        assert frame[-1][0], 'no direct entry was resolved'
+        start = (np.ascontiguousarray(initial)[None] if initial is not None
+                 else frame[5])
+        nodes, forces = chain.load_arrays(loads)
+        dispatched = solves._scene(solves._solve_entry(
+            frame[4], solves._SCENE, np.array([pressure]), nodes, forces[None], start,
+            frame[1], frame[2], frame[3], solves.SOLVE, engine.ALL), 0, engine.ALL)
+        assert np.array_equal(direct.x, dispatched.x)
+        assert direct.iterations == dispatched.iterations
+        for mine, theirs in zip(direct.fields, dispatched.fields):
+            assert np.array_equal(mine, theirs) if mine is not None else theirs is None
+
+
+def test_an_initial_state_of_another_shape_is_refused():
+    solver = CCMSolver(ActuatorDesign.paper(0.25), 8)
+    with pytest.raises(ValueError, match=r'`initial` has shape \(7, 4\)'):
+        engine.solve(solver.engine_problem, 1e3, [], solver._options, np.zeros((7, 4)))
