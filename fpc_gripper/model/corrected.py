@@ -6,7 +6,7 @@ import functools
 import numpy as np
 
 from .discretisations.pcc import material_jacobian, PCCSolver
-from .engine import ALL, Fields
+from .engine import ALL, Fields, SHAPE
 from .kernels.shear import shear_moves, shear_outputs
 from .section.law import (_add_linear, _box_moments, SECTION_PARAMETERS, SectionLaw,
                           station_layout)
@@ -359,6 +359,15 @@ class CorrectedSolver(PCCSolver):
     def _sheared(self, force):
         """Whether a tip force (f0, p0) [N] moves the points: a compliance and a force."""
         return self.correction.shear_compliance != 0.0 and (force[0] != 0.0 or force[1] != 0.0)
+
+    def _fields_level(self, level, force):
+        """
+        Return the level the engine computes a solve's outputs to (`RungSolver.solve`).
+
+        With a shear move the circle is fitted to the moved samples (`_result`), so the
+        engine stops at the samples rather than fit the rod's, which would be dropped.
+        """
+        return SHAPE if level >= ALL and self._sheared(force) else level
 
     def _result(self, outcome, pressure, tip_force, point_loads=(), model_choice=None,
                 level=ALL):

@@ -9,7 +9,7 @@ import pytest
 from scipy.optimize import least_squares
 
 from fpc_gripper.calibration.continuum import correction_tips, fe_scenes
-from fpc_gripper.model import ActuatorDesign
+from fpc_gripper.model import ActuatorDesign, engine
 from fpc_gripper.model.corrected import (_moment_rates, CONTINUUM_FIT, ContinuumCorrection,
                                          CorrectedSolver, PAPER_PHYSICS, PARAMETERS,
                                          shear_displacements)
@@ -329,3 +329,26 @@ def test_position_at_keeps_the_shape_of_its_argument():
     assert_allclose(result.position_at(solver.length), result.tip, atol=1e-12)
     with pytest.raises(ValueError, match='`s`'):
         result.position_at(1.0)
+
+
+def test_the_engine_stops_at_the_samples_where_the_shear_refits_the_circle(monkeypatch):
+    # With a shear move the rod's circle would be dropped: the engine is not asked for it,
+    # and the result still has the moved samples' circle.
+    solver = CorrectedSolver(ActuatorDesign.paper(prestrain=0.25), CONTINUUM_FIT)
+    plain = CorrectedSolver(solver.design, PAPER_PHYSICS)
+    levels = []
+    solve = engine.solve
+
+    def spy(*args):
+        levels.append(args[-1])
+        return solve(*args)
+
+    monkeypatch.setattr(engine, 'solve', spy)
+    loaded = solver.solve(0.0, (0.0, 0.3))
+    unloaded = solver.solve(0.0)
+    tip = solver.solve(0.0, (0.0, 0.3), outputs='tip')
+    rod = plain.solve(0.0, (0.0, 0.3))
+    assert levels == [engine.SHAPE, engine.ALL, engine.TIP, engine.ALL]
+    for result in (loaded, unloaded, rod):
+        assert np.isfinite(result.curvature) and np.isfinite(result.fit_rmsd)
+    assert tip.curvature is None and tip.points is None
