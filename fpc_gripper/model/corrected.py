@@ -283,9 +283,10 @@ class CorrectedSolver(PCCSolver):
     The fast rung corrected to the 2-D continuum: the PCC on a corrected section layout.
 
     The PCC rod (`PCCSolver`, its compiled kernels unchanged) on `corrected_layout`, with
-    the shear displacements of the tip force added to the tip, nodes, samples and
-    `position_at`. With `PAPER_PHYSICS` it is the paper's PCC. Fitted to the unpressurised
-    FE scenes only: under pressure the FE is no reference (docs/physics.md, section 18).
+    the shear displacements of the tip force (compiled, `kernels.shear`) added to the tip,
+    nodes, samples and `position_at`. With `PAPER_PHYSICS` it is the paper's PCC. Fitted to
+    the unpressurised FE scenes only: under pressure the FE is no reference
+    (docs/physics.md, section 18).
 
     Parameters
     ----------
