@@ -111,6 +111,19 @@ def _ccm():
 def _pcc():
     from fpc_gripper.model import PCCSolver
     _scenes(PCCSolver(_design(), n_segments=22))
+    _corrected()
+
+
+def _corrected():
+    """Run the corrected rung's shear move: every output level, `position_at`, `shear_tip`."""
+    from fpc_gripper.model.corrected import CorrectedSolver, shear_displacements
+    solver = CorrectedSolver(_design())
+    for outputs in ('tip', 'shape', 'all'):
+        result = solver.solve(pressure=1.0e5, tip_force=(0.05, -0.05), outputs=outputs)
+        _outputs(result)
+        result.position_at([0.01, 0.045])
+    solver.shear_tip(result.x, (0.05, -0.05))
+    shear_displacements(result.x[2::3], solver.lengths, [1], [0.001], (0.05, -0.05), 1.0)
 
 
 def _adaptive():

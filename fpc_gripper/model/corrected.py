@@ -1,20 +1,21 @@
 """The continuum-corrected fast rung: the PCC rod with effective parameters fitted to the FE."""
 
 from dataclasses import dataclass
+import functools
 
 import numpy as np
 
-from .discretisations.pcc import PCCSolver
-from .kernels.circle import circle_fit
-from .result import Result
+from .discretisations.pcc import material_jacobian, PCCSolver
+from .engine import ALL, Fields, SHAPE
+from .kernels.shear import shear_moves, shear_outputs
 from .section.law import (_add_linear, _box_moments, SECTION_PARAMETERS, SectionLaw,
                           station_layout)
 from .section.segments import share_segments
-from .validation import real_number
+from .validation import arc_lengths, real_number
 
 __all__ = ['ContinuumCorrection', 'CorrectedSolver', 'PAPER_PHYSICS', 'CONTINUUM_FIT',
            'CLAMP_ZONE', 'CHANNEL_END_ZONE', 'CORRECTED_SEGMENTS', 'corrected_layout',
-           'shear_displacements', 'PARAMETERS']
+           'shear_displacements', 'sheared_positions_at', 'PARAMETERS']
 
 #: Length of the clamp zone from the clamp edge [m]: the Saint-Venant zone where the
 #: clamped face holds the PEMC's shortening (the FE's first 2-5 mm, docs/physics.md 18.1).
@@ -26,6 +27,10 @@ CHANNEL_END_ZONE = 4.0e-3
 CORRECTED_SEGMENTS = 32
 #: Column of a segment's angle in the engine's unknowns (eps, c1, theta) per segment.
 _THETA = 2
+#: No points, as the shear kernels take them (a tip-only move).
+_NO_SEGMENTS = np.zeros(0, dtype=np.int64)
+_NO_OFFSETS = np.zeros(0)
+_NO_POINTS = np.zeros((0, 2))
 #: Parameters of `CorrectedSolver.parameter_gradient`: `SECTION_PARAMETERS`, then the
 #: stiffness factors (the shear compliance acts after the solve: `CorrectedSolver.shear_tip`).
 PARAMETERS = SECTION_PARAMETERS + ('band_stiffness', 'clamp_stiffness',
@@ -175,25 +180,12 @@ def corrected_layout(design, correction):
         np.array(directions).transpose(1, 0, 2, 3)
 
 
-def _moments(a, b, length):
-    """Return int n n^T ds as (xx, xz, zz), shape (3, ...), over parts from angle a to b [m]."""
-    d = b - a
-    # sin(d) / d loses no digits as d -> 0; only d = 0 itself needs a stand-in (sinc 1).
-    d = np.where(d == 0.0, 1e-300, d)
-    half = 0.5 * length
-    sinc = np.sin(d) / d * half
-    p = a + b
-    c = np.cos(p) * sinc
-    out = np.empty((3,) + c.shape, dtype=c.dtype)
-    np.subtract(half, c, out=out[0])
-    np.multiply(np.sin(p), -sinc, out=out[1])
-    np.add(half, c, out=out[2])
-    return out
-
-
 def _moment_rates(a, b, length):
     """
-    Return d/da and d/db of `_moments` (xx, xz, zz), each shape (3, ...) [m/rad].
+    Return d/da and d/db of the part moments (xx, xz, zz), each shape (3, ...) [m/rad].
+
+    The part moments are int n n^T ds over an arc part from angle a to b
+    (`kernels.shear._part_moments`, `shear_displacements`).
 
     With p = a + b, d = b - a and s(d) = sin(d) / d: c = (l / 2) cos(p) s(d) gives
     dc/da = (l / 2)(-sin p s - cos p s'), dc/db = (l / 2)(-sin p s + cos p s'), and
@@ -220,7 +212,8 @@ def shear_displacements(theta, lengths, segment, offset, force, compliance):
     phi(s) (from +X towards +Z); the shear strain V / (k G A) moves the section along n,
     so a point at s moves by c int_0^s n n^T ds F, with phi linear in each PCC segment:
     int n n^T ds = (l / 2) (I - [[C, S], [S, -C]]), (C, S) = (cos, sin)(a + b) sinc(b - a)
-    over a segment part of reference length l from angle a to b.
+    over a segment part of reference length l from angle a to b (compiled:
+    `kernels.shear.shear_moves`).
 
     Parameters
     ----------
@@ -241,21 +234,48 @@ def shear_displacements(theta, lengths, segment, offset, force, compliance):
 
     """
     theta = np.asarray(theta, dtype=float)
-    lengths = np.asarray(lengths, dtype=float)
-    segment = np.asarray(segment)
-    offset = np.asarray(offset, dtype=float)
-    start = np.empty_like(theta)
-    start[0] = 0.0
-    start[1:] = theta[:-1]
-    whole = np.zeros((3, theta.size + 1))
-    np.cumsum(_moments(start, theta, lengths), axis=1, out=whole[:, 1:])
-    a = start[segment]
-    xx, xz, zz = whole[:, segment] + _moments(
-        a, a + (theta[segment] - a) * (offset / lengths[segment]), offset)
-    out = np.empty((segment.size, 2))
-    out[:, 0] = xx * force[0] + xz * force[1]
-    out[:, 1] = xz * force[0] + zz * force[1]
-    return compliance * out
+    # The kernel reads the angles from the engine's unknowns (eps, c1, theta) per segment.
+    x = np.zeros(3 * theta.size)
+    x[_THETA::3] = theta
+    return shear_moves(x, np.ascontiguousarray(lengths, dtype=float),
+                       np.ascontiguousarray(segment, dtype=np.int64),
+                       np.ascontiguousarray(offset, dtype=float), float(force[0]),
+                       float(force[1]), float(compliance))[1]
+
+
+def sheared_positions_at(x, edges, force, compliance, s):
+    """
+    Midplane position of the corrected rung's material points at arc lengths `s` [m].
+
+    The PCC's (`pcc.positions_at`) plus the shear move of the tip force (as
+    `shear_displacements`); a result's `position_at` is this function of its own state.
+
+    Parameters
+    ----------
+    x : ndarray, shape (3 N,)
+        Engine unknowns.
+    edges : ndarray, shape (N + 1,)
+        Segment edges [m].
+    force : (float, float)
+        Tip force (f0, p0) [N].
+    compliance : float
+        1 / (k G A) [1/N].
+    s : float or array_like
+        Reference arc length from the clamp edge, in [0, L] [m].
+
+    Returns
+    -------
+    ndarray, shape s.shape + (2,)
+        Global (X, Z) [m].
+
+    """
+    values, shape = arc_lengths('s', s, edges[-1])
+    lengths = np.diff(edges)
+    seg = np.clip(np.searchsorted(edges, values, side='right') - 1, 0, lengths.size - 1)
+    moves = shear_moves(x, lengths, seg.astype(np.int64),
+                        np.minimum(values - edges[seg], lengths[seg]), force[0], force[1],
+                        compliance)[1]
+    return (material_jacobian(x, edges, values)[0] + moves).reshape(shape + (2,))
 
 
 class CorrectedSolver(PCCSolver):
@@ -263,9 +283,10 @@ class CorrectedSolver(PCCSolver):
     The fast rung corrected to the 2-D continuum: the PCC on a corrected section layout.
 
     The PCC rod (`PCCSolver`, its compiled kernels unchanged) on `corrected_layout`, with
-    the shear displacements of the tip force added to the tip, nodes, samples and
-    `position_at`. With `PAPER_PHYSICS` it is the paper's PCC. Fitted to the unpressurised
-    FE scenes only: under pressure the FE is no reference (docs/physics.md, section 18).
+    the shear displacements of the tip force (compiled, `kernels.shear`) added to the tip,
+    nodes, samples and `position_at`. With `PAPER_PHYSICS` it is the paper's PCC. Fitted to
+    the unpressurised FE scenes only: under pressure the FE is no reference
+    (docs/physics.md, section 18).
 
     Parameters
     ----------
@@ -285,10 +306,6 @@ class CorrectedSolver(PCCSolver):
                             f'got {type(correction).__name__}')
         self.correction = correction
         super().__init__(design, n_segments, pressure_model, **options)
-        # For the shear move: the samples' fraction of their segment, and the lengths of
-        # the parts it integrates over (the segments, then the samples' partial segments).
-        self._sample_fraction = self._sample_offset / self.lengths[self._sample_segment]
-        self._moment_lengths = np.concatenate((self.lengths, self._sample_offset))
         self._constants['model'] = f'pcc N={self.n_segments}, continuum-corrected'
 
     def _layout(self, design, n_segments):
@@ -328,10 +345,11 @@ class CorrectedSolver(PCCSolver):
         the compliance c, and through the segments' angles in the unknowns.
         """
         force = np.asarray(force, dtype=float)
-        theta = np.asarray(x, dtype=float)[_THETA::3]
+        x = np.ascontiguousarray(x, dtype=float)
+        move = shear_moves(x, self.lengths, _NO_SEGMENTS, _NO_OFFSETS, float(force[0]),
+                           float(force[1]), 1.0)[0][-1]
+        theta = x[_THETA::3]
         start = np.concatenate([[0.0], theta[:-1]])
-        xx, xz, zz = _moments(start, theta, self.lengths).sum(axis=1)
-        move = np.array([xx * force[0] + xz * force[1], xz * force[0] + zz * force[1]])
         d_start, d_end = _moment_rates(start, theta, self.lengths)
         d_end[:, :-1] += d_start[:, 1:]
         jac = np.zeros((2, theta.size * 3))
@@ -339,54 +357,53 @@ class CorrectedSolver(PCCSolver):
         jac[1, _THETA::3] = d_end[1] * force[0] + d_end[2] * force[1]
         return move, jac
 
+    def _sheared(self, force):
+        """Whether a tip force (f0, p0) [N] moves the points: a compliance and a force."""
+        return self.correction.shear_compliance != 0.0 and (force[0] != 0.0 or force[1] != 0.0)
+
+    def _fields_level(self, level, force):
+        """
+        Return the level the engine computes a solve's outputs to (`RungSolver.solve`).
+
+        With a shear move the circle is fitted to the moved samples (`_result`), so the
+        engine stops at the samples rather than fit the rod's, which would be dropped.
+        """
+        return SHAPE if level >= ALL and self._sheared(force) else level
+
     def _result(self, outcome, pressure, tip_force, point_loads=(), model_choice=None,
-                **level):
-        result = super()._result(outcome, pressure, tip_force, point_loads, model_choice,
-                                 **level)
-        force = np.asarray(result.tip_force, dtype=float)
-        compliance = self.correction.shear_compliance
-        if compliance == 0.0 or not force.any():
-            return result
-        fields = dict(result.__dict__)
-        theta = result.x[_THETA::3]
-        edges, lengths, n = self.edges, self.lengths, self.n_segments
-        # F^T as the map from (xx, xz, zz) to the move, times the compliance.
-        mix = compliance * np.array([[force[0], force[1], 0.0], [0.0, force[0], force[1]]])
-        if result.nodes is None:
-            fields['tip'] = result.tip + mix @ _moments(
-                np.concatenate(([0.0], theta[:-1])), theta, lengths).sum(axis=1)
-        else:
-            # One pass over the segments and the samples' partial segments together.
-            seg, rho = self._sample_segment, self._sample_fraction
-            start = np.zeros(n + seg.size)
-            start[1:n] = theta[:-1]
-            begin = start[seg]
-            start[n:] = begin
-            end = np.concatenate((theta, begin + (theta[seg] - begin) * rho))
-            parts = _moments(start, end, self._moment_lengths)
-            whole = np.zeros((3, n + 1 + seg.size))
-            np.cumsum(parts[:, :n], axis=1, out=whole[:, 1:n + 1])
-            whole[:, n + 1:] = whole[:, seg] + parts[:, n:]
-            moves = mix @ whole
-            fields['tip'] = result.tip + moves[:, n]
-            fields['nodes'] = result.nodes + moves[:, :n + 1].T
-            fields['points'] = result.points + moves[:, n + 1:].T
-            if result.curvature is not None:
-                # The circle of the moved samples; only where the fit was asked for ('all').
-                fields['curvature'], fields['fit_rmsd'] = (
-                    float(v) for v in circle_fit(fields['points'])[:2])
-        base = result.position_at
+                level=ALL):
+        if self._sheared(tip_force):
+            f = outcome.fields
+            if f is None:
+                f = self._python_fields(outcome.x, pressure, tip_force, level)
+            # The rod's tip and the load moving it, in the kernel's order after the samples.
+            load = (float(tip_force[0]), float(tip_force[1]),
+                    self.correction.shear_compliance, f.tip)
+            if f.nodes is None:
+                f = f._replace(tip=shear_outputs(outcome.x, self.lengths, _NO_SEGMENTS,
+                                                 _NO_OFFSETS, *load, _NO_POINTS, _NO_POINTS,
+                                                 False)[0])
+            else:
+                # One compiled pass: the moves of the tip, nodes and samples, and the
+                # circle of the moved samples where it was asked for ('all').
+                fit = level >= ALL
+                tip, nodes, points, curvature, rmsd = shear_outputs(
+                    outcome.x, self.lengths, self._sample_segment, self._sample_offset, *load,
+                    f.nodes, f.points, fit)
+                f = Fields(tip, f.energy, f.valid, curvature if fit else None,
+                           rmsd if fit else None, nodes, f.beta, f.theta, f.coefficients,
+                           points, f.tangent, f.strains)
+            outcome = outcome._replace(fields=f)
+        return super()._result(outcome, pressure, tip_force, point_loads, model_choice,
+                               level=level)
 
-        def position_at(s):
-            s_arr = np.asarray(s, dtype=float)
-            seg = np.clip(np.searchsorted(edges, s_arr, side='right') - 1, 0, n - 1)
-            moved = shear_displacements(
-                theta, lengths, np.atleast_1d(seg),
-                np.atleast_1d(np.minimum(s_arr - edges[seg], lengths[seg])), force, compliance)
-            return np.asarray(base(s)) + (moved[0] if s_arr.ndim == 0 else moved)
-
-        fields['position_at'] = position_at
-        return Result.of(fields)
+    def _positions(self, x, pressure, force):
+        """Return the `position_at` of a result: `sheared_positions_at` under a shear move."""
+        if not self._sheared(force):
+            return super()._positions(x, pressure, force)
+        return functools.partial(sheared_positions_at, x, self.edges,
+                                 (float(force[0]), float(force[1])),
+                                 self.correction.shear_compliance)
 
     def rigidity(self, *args, **kwargs):
         """Refuse: the displacement control does not carry the shear correction."""

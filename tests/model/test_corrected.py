@@ -6,13 +6,15 @@ import pathlib
 import numpy as np
 from numpy.testing import assert_allclose
 import pytest
+from scipy.optimize import least_squares
 
 from fpc_gripper.calibration.continuum import correction_tips, fe_scenes
-from fpc_gripper.model import ActuatorDesign
-from fpc_gripper.model.corrected import (_moment_rates, _moments, CONTINUUM_FIT,
-                                         ContinuumCorrection, CorrectedSolver, PAPER_PHYSICS,
-                                         PARAMETERS, shear_displacements)
+from fpc_gripper.model import ActuatorDesign, engine
+from fpc_gripper.model.corrected import (_moment_rates, CONTINUUM_FIT, ContinuumCorrection,
+                                         CorrectedSolver, PAPER_PHYSICS, PARAMETERS,
+                                         shear_displacements)
 from fpc_gripper.model.discretisations.pcc import PCCSolver
+from fpc_gripper.model.kernels.shear import shear_moves
 from fpc_gripper.model.pipeline import finger_model, ModelSettings
 from fpc_gripper.model.section.materials import Material
 
@@ -20,6 +22,36 @@ TABLE = pathlib.Path(__file__).resolve().parents[2] / 'bench' / 'results' / 'con
 #: Largest tip distance to the FE the stored correction reaches on the unpressurised
 #: scenes (0.188 mm, bench/results/continuum_fit.json), with a margin [m].
 TOLERANCE = 0.2e-3
+
+
+def _reference_moments(a, b, length):
+    """
+    int n n^T ds over arc parts from angle a to b, as (xx, xz, zz), shape (3, ...) [m].
+
+    The closed form (l / 2)(I - [[C, S], [S, -C]]) in numpy, complex-safe: the slow
+    reference the compiled kernel (`kernels.shear`) replaced.
+    """
+    d = b - a
+    d = np.where(d == 0.0, 1e-300, d)
+    half = 0.5 * np.asarray(length)
+    sinc = np.sin(d) / d * half
+    p = a + b
+    c = np.cos(p) * sinc
+    return np.stack([half - c, -np.sin(p) * sinc, half + c])
+
+
+def _reference_moves(theta, lengths, s, force, compliance):
+    """The shear move of the points at arc lengths s, each a sum over every segment [m]."""
+    edges = np.concatenate([[0.0], np.cumsum(lengths)])
+    start = np.concatenate([[0.0], theta[:-1]])
+    out = np.zeros((len(s), 2))
+    for k, value in enumerate(s):
+        # The part of every segment before the point: 0, a partial segment or all of it.
+        sigma = np.clip(value - edges[:-1], 0.0, lengths)
+        xx, xz, zz = _reference_moments(
+            start, start + (theta - start) * sigma / lengths, sigma).sum(axis=1)
+        out[k] = compliance * np.array([[xx, xz], [xz, zz]]) @ force
+    return out
 
 
 @pytest.fixture(scope='module')
@@ -160,8 +192,10 @@ def test_moment_rates_against_complex_step():
     d_a, d_b = _moment_rates(a, b, lengths)
     # The complex step of sin(d) / d itself cancels digits at small d (1e-10 relative at
     # d = 1e-3), hence the tolerance; the rates use the series there.
-    assert_allclose(d_a, _moments(a + 1j * h, b, lengths).imag / h, rtol=1e-9, atol=1e-14)
-    assert_allclose(d_b, _moments(a, b + 1j * h, lengths).imag / h, rtol=1e-9, atol=1e-14)
+    assert_allclose(d_a, _reference_moments(a + 1j * h, b, lengths).imag / h, rtol=1e-9,
+                    atol=1e-14)
+    assert_allclose(d_b, _reference_moments(a, b + 1j * h, lengths).imag / h, rtol=1e-9,
+                    atol=1e-14)
 
 
 def test_shear_tip_jacobian_against_finite_differences():
@@ -213,3 +247,108 @@ def test_outputs_not_asked_for_stay_none_with_a_tip_load():
     assert shape.curvature is None and shape.fit_rmsd is None
     assert_allclose(shape.points, full.points, atol=1e-15)
     assert full.curvature is not None and np.isfinite(full.curvature)
+
+
+@pytest.mark.parametrize('force', [(0.3, -0.4), (0.0, 0.3), (-0.25, 0.0)])
+def test_compiled_shear_moves_equal_the_numpy_closed_form_and_quadrature(force):
+    # The kernel's running sums against every point summed on its own over the segments
+    # (the numpy closed form it replaced), and against trapezoid quadrature of n n^T F.
+    solver, x, _ = _loaded_state(CONTINUUM_FIT, force)
+    theta, lengths, edges = x[2::3], solver.lengths, solver.edges
+    force = np.array(force)
+    s = np.concatenate([edges, np.linspace(0.0, solver.length, 37), [0.5 * edges[3]]])
+    seg = np.clip(np.searchsorted(edges, s, side='right') - 1, 0, lengths.size - 1)
+    nodes, points = shear_moves(x, lengths, seg, np.minimum(s - edges[seg], lengths[seg]),
+                                force[0], force[1], 0.02)
+    expected = _reference_moves(theta, lengths, s, force, 0.02)
+    assert_allclose(points, expected, rtol=0, atol=1e-15)
+    assert_allclose(nodes, expected[:edges.size], rtol=0, atol=1e-15)
+    assert np.abs(points).max() > 1e-4
+    grid = np.linspace(0.0, solver.length, 200001)
+    i = np.clip(np.searchsorted(edges, grid, side='right') - 1, 0, lengths.size - 1)
+    start = np.concatenate([[0.0], theta[:-1]])
+    phi = start[i] + (theta[i] - start[i]) * (grid - edges[i]) / lengths[i]
+    normal = np.stack([-np.sin(phi), np.cos(phi)], axis=1)
+    shear = normal * (normal @ force)[:, None]
+    tip = 0.02 * np.trapezoid(shear, grid, axis=0)
+    assert_allclose(nodes[-1], tip, rtol=1e-8, atol=1e-14)
+
+
+@pytest.mark.parametrize('outputs', ['tip', 'shape', 'all'])
+@pytest.mark.parametrize('pressure, force', [(0.0, (0.3, -0.4)), (1.5e5, (0.0, 0.3)),
+                                             (3.0e5, (-0.2, 0.0))])
+def test_result_is_the_rod_plus_the_reference_shear_move(outputs, pressure, force):
+    # Every field against the same solve without the shear term (the rod: the compliance
+    # does not enter the equilibrium) plus the numpy reference move of its points.
+    correction = ContinuumCorrection(0.8, 1.4, 3.0, 0.05)
+    design = ActuatorDesign.paper(prestrain=0.25)
+    got = CorrectedSolver(design, correction).solve(pressure, force, outputs=outputs)
+    rod = CorrectedSolver(design, ContinuumCorrection(*correction.values[:3])).solve(
+        pressure, force, outputs=outputs)
+    solver = CorrectedSolver(design, correction)
+    assert got.success and rod.success
+    assert_allclose(got.x, rod.x, rtol=0, atol=0)
+    theta, lengths = got.x[2::3], solver.lengths
+    move = _reference_moves(theta, lengths, [solver.length], np.array(force), 0.05)[0]
+    assert_allclose(got.tip, rod.tip + move, rtol=0, atol=1e-14)
+    s = np.linspace(0.0, solver.length, solver.samples)
+    if outputs == 'tip':
+        assert got.nodes is None and got.points is None and got.curvature is None
+    else:
+        assert_allclose(got.nodes, rod.nodes + _reference_moves(
+            theta, lengths, solver.edges, np.array(force), 0.05), rtol=0, atol=1e-14)
+        assert_allclose(got.points, rod.points + _reference_moves(
+            theta, lengths, s, np.array(force), 0.05), rtol=0, atol=1e-14)
+        for name in ('energy', 'beta', 'theta', 'coefficients', 'tangent', 'strains'):
+            assert_allclose(getattr(got, name), getattr(rod, name), rtol=0, atol=0)
+    if outputs == 'all':
+        # The circle through the moved samples, by an independent geometric fit.
+        def distances(params):
+            return np.hypot(*(got.points - params[:2]).T) - params[2]
+
+        centre = np.array([0.0, -1.0 / got.curvature])
+        fit = least_squares(distances, [*centre, abs(1.0 / got.curvature)], xtol=1e-15,
+                            ftol=1e-15, gtol=1e-15)
+        assert_allclose(abs(got.curvature), 1.0 / fit.x[2], rtol=1e-7)
+        assert_allclose(got.fit_rmsd, np.sqrt(np.mean(fit.fun ** 2)), rtol=1e-6)
+        assert abs(got.curvature - rod.curvature) > 1e-6 * abs(rod.curvature)
+    else:
+        assert got.curvature is None and got.fit_rmsd is None
+    assert_allclose(got.position_at(s), rod.position_at(s) + _reference_moves(
+        theta, lengths, s, np.array(force), 0.05), rtol=0, atol=1e-14)
+
+
+def test_position_at_keeps_the_shape_of_its_argument():
+    solver = CorrectedSolver(ActuatorDesign.paper(prestrain=0.25), CONTINUUM_FIT)
+    result = solver.solve(0.0, (0.3, -0.4))
+    s = np.linspace(0.0, solver.length, 6).reshape(2, 3)
+    grid = result.position_at(s)
+    assert grid.shape == (2, 3, 2)
+    assert_allclose(grid.reshape(-1, 2), result.position_at(s.ravel()), rtol=0, atol=0)
+    assert result.position_at(0.03).shape == (2,)
+    assert_allclose(result.position_at(solver.length), result.tip, atol=1e-12)
+    with pytest.raises(ValueError, match='`s`'):
+        result.position_at(1.0)
+
+
+def test_the_engine_stops_at_the_samples_where_the_shear_refits_the_circle(monkeypatch):
+    # With a shear move the rod's circle would be dropped: the engine is not asked for it,
+    # and the result still has the moved samples' circle.
+    solver = CorrectedSolver(ActuatorDesign.paper(prestrain=0.25), CONTINUUM_FIT)
+    plain = CorrectedSolver(solver.design, PAPER_PHYSICS)
+    levels = []
+    solve = engine.solve
+
+    def spy(*args):
+        levels.append(args[-1])
+        return solve(*args)
+
+    monkeypatch.setattr(engine, 'solve', spy)
+    loaded = solver.solve(0.0, (0.0, 0.3))
+    unloaded = solver.solve(0.0)
+    tip = solver.solve(0.0, (0.0, 0.3), outputs='tip')
+    rod = plain.solve(0.0, (0.0, 0.3))
+    assert levels == [engine.SHAPE, engine.ALL, engine.TIP, engine.ALL]
+    for result in (loaded, unloaded, rod):
+        assert np.isfinite(result.curvature) and np.isfinite(result.fit_rmsd)
+    assert tip.curvature is None and tip.points is None

@@ -139,8 +139,13 @@ class RungSolver:
         if start is not None and not warm_start_allowed(math.hypot(*force)):
             start = None
         loads = self.tip_loads(force)
-        outcome = engine.solve(self.engine_problem, pressure, loads, self._options, start, level)
+        outcome = engine.solve(self.engine_problem, pressure, loads, self._options, start,
+                               self._fields_level(level, force))
         return self._result(outcome, pressure, force, model_choice=model_choice, level=level)
+
+    def _fields_level(self, level, force):
+        """Return the level the engine computes a solve's outputs to: the one asked for."""
+        return level
 
     def _result(self, outcome, pressure, tip_force, point_loads=(), model_choice=None,
                 level=_ALL):
