@@ -99,9 +99,18 @@ def _settings(settings):
     return settings
 
 
-def _compiled(solver):
-    """Whether a rung runs compiled (a batch can take it), not interpreted (the rod)."""
-    return isinstance(solver.engine_problem, engine.CompiledProblem)
+def _batched(solver, loaded):
+    """
+    Whether a compiled batch gives `solver`'s scenes, loaded or not, as its single solve.
+
+    Not for a rung that runs interpreted (the rod), nor for one whose solve moves the
+    engine's state afterwards (`CorrectedSolver`'s shear move under a tip load), which a
+    batch row does not carry: their scenes are single solves.
+    """
+    if not isinstance(solver.engine_problem, engine.CompiledProblem):
+        return False
+    moves = getattr(solver, 'moves_after_solve', None)
+    return moves is None or not moves(loaded)
 
 
 #: The level of every single solve a grid makes, and of a scene's `result`.
@@ -294,27 +303,26 @@ def solve_grid(designs, pressures, tip_forces=((0.0, 0.0),), settings=ModelSetti
     for d, design in enumerate(designs):
         model = out.models_of[d] = finger_model(design, settings)
         base = d * per_design
-        if not isinstance(model, AdaptiveSolver) and not _compiled(model):
-            # A fixed rung that does not run compiled (the rod): its own solves.
-            for k in range(per_design):
-                out.single(base + k, model.solve(scene_p[k], scene_f[k]))
-            continue
         if not isinstance(model, AdaptiveSolver):
-            # One solver for the whole design: its loaded and unloaded scenes as two blocks.
+            # One solver for the whole design: its loaded and unloaded scenes as two blocks,
+            # each batched, or its own solves where a batch would not give them (the rod).
             for loaded in (False, True):
-                block = base + np.flatnonzero(scene_loaded == loaded)
-                if block.size:
-                    groups.add(model, loaded, block)
+                local = np.flatnonzero(scene_loaded == loaded)
+                if local.size and _batched(model, loaded):
+                    groups.add(model, loaded, base + local)
+                    continue
+                for k in local:
+                    out.single(base + k, model.solve(scene_p[k], scene_f[k]))
             continue
         blocks = {}
         for k, (solver, choice) in enumerate(zip(*_choices(model, scene_p, scene_f))):
             scene = base + k
             out.choices[scene] = choice
-            if _compiled(solver):
+            if _batched(solver, bool(scene_loaded[k])):
                 blocks.setdefault((id(solver), bool(scene_loaded[k])), (solver, []))[1] \
                     .append(scene)
             else:
-                # A rung that does not run compiled (the rod): its own solve.
+                # A rung that a batch does not give (the rod): its own solve.
                 out.single(scene, model.solve(scene_p[k], scene_f[k]))
         for (_, loaded), (solver, scenes) in blocks.items():
             groups.add(solver, loaded, scenes)
@@ -432,7 +440,8 @@ def rigidity_grid(designs, pressures, axis='x', displacement=0.010, settings=Mod
         for solver, choice, pressure in zip(solvers, choices, scene_p):
             scene = len(scenes)
             scenes.append((solver, pressure, choice))
-            if _compiled(solver):
+            # The displacement control solves a loaded state.
+            if _batched(solver, True):
                 blocks.setdefault(id(solver), (solver, []))[1].append(scene)
             else:
                 _store_rigidity(out, scene, checked_rigidity(

@@ -361,6 +361,16 @@ class CorrectedSolver(PCCSolver):
         """Whether a tip force (f0, p0) [N] moves the points: a compliance and a force."""
         return self.correction.shear_compliance != 0.0 and (force[0] != 0.0 or force[1] != 0.0)
 
+    def moves_after_solve(self, loaded):
+        """
+        Whether a solve, loaded or not, moves the engine's state afterwards (`batch`).
+
+        The shear move of a tip load: a compiled batch row does not carry it, so
+        `batch.solve_grid` solves those scenes singly, and `rigidity_grid` refuses with
+        `rigidity`.
+        """
+        return bool(loaded) and self.correction.shear_compliance != 0.0
+
     def _fields_level(self, level, force):
         """
         Return the level the engine computes a solve's outputs to (`RungSolver.solve`).
@@ -406,7 +416,13 @@ class CorrectedSolver(PCCSolver):
                                  self.correction.shear_compliance)
 
     def rigidity(self, *args, **kwargs):
-        """Refuse: the displacement control does not carry the shear correction."""
+        """
+        `PCCSolver.rigidity` without a shear compliance; refuse with one.
+
+        The bordered displacement control does not carry the shear correction.
+        """
+        if self.correction.shear_compliance == 0.0:
+            return super().rigidity(*args, **kwargs)
         raise NotImplementedError('CorrectedSolver.rigidity: the bordered displacement '
                                   'control does not include the shear correction; use '
                                   'solve() with a tip force')

@@ -184,5 +184,5 @@ def model_label(result):
 
 
 def solver_label(solver):
-    """Return the label of the rung and N of a solver, e.g. 'pcc N=22', 'ccm N=8' or 'rod'."""
-    return rung_label(solver.rung, solver.n_segments)
+    """Return the `model` label of a solver's results, e.g. 'pcc N=22', 'ccm N=8' or 'rod'."""
+    return solver._constants['model']

@@ -9,7 +9,7 @@ import pytest
 from scipy.optimize import least_squares
 
 from fpc_gripper.calibration.continuum import correction_tips, fe_scenes
-from fpc_gripper.model import ActuatorDesign, engine
+from fpc_gripper.model import ActuatorDesign, batch, engine
 from fpc_gripper.model.corrected import (_moment_rates, CONTINUUM_FIT, ContinuumCorrection,
                                          CorrectedSolver, PAPER_PHYSICS, PARAMETERS,
                                          shear_displacements)
@@ -352,3 +352,30 @@ def test_the_engine_stops_at_the_samples_where_the_shear_refits_the_circle(monke
     for result in (loaded, unloaded, rod):
         assert np.isfinite(result.curvature) and np.isfinite(result.fit_rmsd)
     assert tip.curvature is None and tip.points is None
+
+
+def test_grids_of_the_corrected_rung_are_its_single_solves():
+    # A batch row has no shear move: loaded scenes must come from single solves, and the
+    # rigidity grid must refuse as the single call does, not return the uncorrected rod's.
+    settings = ModelSettings(physics='continuum')
+    designs = [ActuatorDesign.paper(0.25), ActuatorDesign.paper(0.4)]
+    forces = [(0.0, 0.0), (0.0, 0.3), (0.2, 0.0)]
+    grid = batch.solve_grid(designs, [0.0, 100e3], forces, settings=settings, outputs='all')
+    for d, design in enumerate(designs):
+        model = finger_model(design, settings)
+        for p, pressure in enumerate(grid.pressures):
+            for f, force in enumerate(forces):
+                single = model.solve(float(pressure), force)
+                assert np.abs(grid.tip[d, p, f] - single.tip).max() <= 1e-12
+                assert grid.curvature[d, p, f] == pytest.approx(single.curvature, abs=1e-9)
+                assert grid.models[d, p, f] == single.model
+    with pytest.raises(NotImplementedError, match='shear correction'):
+        batch.rigidity_grid(designs, [0.0], settings=settings)
+
+
+def test_rigidity_without_a_shear_compliance_is_the_pcc_one():
+    # No shear term to leave out: the corrected layout's own displacement control.
+    design = ActuatorDesign.paper(0.25)
+    mine = CorrectedSolver(design, PAPER_PHYSICS).rigidity(50e3, 'x', 0.010)
+    paper = PCCSolver(design, 32).rigidity(50e3, 'x', 0.010)
+    assert mine.success and mine.value == pytest.approx(paper.value, rel=1e-4)
