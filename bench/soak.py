@@ -362,24 +362,30 @@ class SpilledArray:
         self._memory = array(typecode)
         self._file = tempfile.TemporaryFile()
         self._spilled = 0
+        # The executor's thread appends while the sampling thread spills.
+        self._lock = threading.Lock()
 
     def append(self, value):
-        self._memory.append(value)
+        with self._lock:
+            self._memory.append(value)
 
     def __len__(self):
-        return self._spilled + len(self._memory)
+        with self._lock:
+            return self._spilled + len(self._memory)
 
     def spill(self):
         """Move the values in memory to the file."""
-        if self._memory:
-            self._memory.tofile(self._file)
-            self._spilled += len(self._memory)
-            self._memory = array(self._typecode)
+        with self._lock:
+            memory, self._memory = self._memory, array(self._typecode)
+            self._spilled += len(memory)
+            memory.tofile(self._file)
 
     def __array__(self, dtype=None, copy=None):
-        self._file.seek(0)
-        spilled = np.frombuffer(self._file.read(), dtype=self._memory.typecode)
-        values = np.concatenate([spilled, np.frombuffer(self._memory, dtype=spilled.dtype)])
+        with self._lock:
+            self._file.seek(0)
+            spilled = np.frombuffer(self._file.read(), dtype=self._typecode)
+            self._file.seek(0, 2)
+            values = np.concatenate([spilled, np.frombuffer(self._memory, dtype=spilled.dtype)])
         return values if dtype is None else values.astype(dtype)
 
 

@@ -3,6 +3,7 @@
 import math
 import pathlib
 import sys
+import threading
 
 from nav_msgs.msg import Path
 import numpy as np
@@ -93,3 +94,21 @@ def test_spilled_records_keep_every_value_and_hold_only_one_period_in_memory():
     assert len(stamps) == 50 * 200 + 1
     assert_array_equal(np.asarray(stamps, dtype=np.int64), expected)
     assert_array_equal(np.asarray(latencies), np.asarray(expected[:-1]) * 1e-9)
+
+
+def test_spilling_from_another_thread_loses_nothing():
+    # The sampling thread spills while the executor's thread appends.
+    records = SpilledArray('q')
+    done = threading.Event()
+
+    def append():
+        for i in range(200_000):
+            records.append(i)
+        done.set()
+
+    thread = threading.Thread(target=append)
+    thread.start()
+    while not done.is_set():
+        records.spill()
+    thread.join()
+    assert_array_equal(np.asarray(records), np.arange(200_000))
