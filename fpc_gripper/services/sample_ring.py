@@ -35,7 +35,7 @@ class SampleRing:
         self._count = 0
 
     def __len__(self):
-        """Samples held (at most `capacity`)."""
+        """Return the number of samples held (at most `capacity`)."""
         return self._count
 
     @property
