@@ -341,6 +341,54 @@ class LatencyTracker:
             self._lost()
 
 
+class SpilledArray:
+    """
+    Numbers appended in memory and moved to an anonymous file at each `spill`.
+
+    The probe keeps every latency and every stamp it received for the end of the run
+    (some 60 MiB an hour at 200 Hz as arrays), and its own RSS is one of those the soak
+    measures: spilled every sample period, they cost this process no memory as the run
+    goes on. ``np.asarray`` gives every value appended, in order.
+
+    Parameters
+    ----------
+    typecode : str
+        The `array.array` type code ('d', 'q').
+
+    """
+
+    def __init__(self, typecode):
+        self._typecode = typecode
+        self._memory = array(typecode)
+        self._file = tempfile.TemporaryFile()
+        self._spilled = 0
+        # The executor's thread appends while the sampling thread spills.
+        self._lock = threading.Lock()
+
+    def append(self, value):
+        with self._lock:
+            self._memory.append(value)
+
+    def __len__(self):
+        with self._lock:
+            return self._spilled + len(self._memory)
+
+    def spill(self):
+        """Move the values in memory to the file."""
+        with self._lock:
+            memory, self._memory = self._memory, array(self._typecode)
+            self._spilled += len(memory)
+            memory.tofile(self._file)
+
+    def __array__(self, dtype=None, copy=None):
+        with self._lock:
+            self._file.seek(0)
+            spilled = np.frombuffer(self._file.read(), dtype=self._typecode)
+            self._file.seek(0, 2)
+            values = np.concatenate([spilled, np.frombuffer(self._memory, dtype=spilled.dtype)])
+        return values if dtype is None else values.astype(dtype)
+
+
 # -- the probe node -------------------------------------------------------------------------
 
 class Probe(Node):
@@ -353,9 +401,10 @@ class Probe(Node):
         self.counting = False
         self.t0 = None
         self.t0_ns = None
-        self.latency_t = array('d')
-        self.latency_ms = array('d')
-        self.received = {(topic, f): array('q') for f in self.fingers for topic in COMPARED}
+        self.latency_t = SpilledArray('d')
+        self.latency_ms = SpilledArray('d')
+        self.received = {(topic, f): SpilledArray('q') for f in self.fingers
+                         for topic in COMPARED}
         self._sequence = [None] * len(self.fingers)
         self.last_command = [None] * len(self.fingers)
         self.goal = None
@@ -395,6 +444,8 @@ class Probe(Node):
 
     def take_window(self):
         window, self.window = self.window, Window()
+        for records in (self.latency_t, self.latency_ms, *self.received.values()):
+            records.spill()
         return window
 
     # -- latency

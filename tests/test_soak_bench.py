@@ -3,13 +3,17 @@
 import math
 import pathlib
 import sys
+import threading
 
 from nav_msgs.msg import Path
+import numpy as np
+from numpy.testing import assert_array_equal
 from rclpy.serialization import serialize_message
 from sensor_msgs.msg import FluidPressure
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / 'bench'))
 from soak import cdr_fluid_pressure, cdr_header, LatencyTracker, NS  # noqa: E402, I100
+from soak import SpilledArray  # noqa: E402
 
 
 def _pressure(sec, nanosec, frame, value):
@@ -67,3 +71,44 @@ def test_latency_tracker_exact_merged_look_back_and_lost():
     tracker.expire(5_001 + 2 * NS)
     assert lost == [1]
     assert not tracker.pending
+
+
+def test_spilled_records_keep_every_value_and_hold_only_one_period_in_memory():
+    # The probe's latencies and stamps were arrays that grew all run (the soak's own RSS
+    # is measured): spilled at every sample, memory holds at most one period's values.
+    stamps, latencies = SpilledArray('q'), SpilledArray('d')
+    assert np.asarray(stamps, dtype=np.int64).size == 0 and len(latencies) == 0
+    expected = []
+    for period in range(50):
+        for i in range(200):
+            value = period * 1_000_000_007 + i * NS
+            stamps.append(value)
+            latencies.append(value * 1e-9)
+            expected.append(value)
+        assert len(stamps._memory) == 200
+        stamps.spill()
+        latencies.spill()
+        assert len(stamps._memory) == len(latencies._memory) == 0
+    stamps.append(-1)
+    expected.append(-1)
+    assert len(stamps) == 50 * 200 + 1
+    assert_array_equal(np.asarray(stamps, dtype=np.int64), expected)
+    assert_array_equal(np.asarray(latencies), np.asarray(expected[:-1]) * 1e-9)
+
+
+def test_spilling_from_another_thread_loses_nothing():
+    # The sampling thread spills while the executor's thread appends.
+    records = SpilledArray('q')
+    done = threading.Event()
+
+    def append():
+        for i in range(200_000):
+            records.append(i)
+        done.set()
+
+    thread = threading.Thread(target=append)
+    thread.start()
+    while not done.is_set():
+        records.spill()
+    thread.join()
+    assert_array_equal(np.asarray(records), np.arange(200_000))

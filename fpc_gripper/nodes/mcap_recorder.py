@@ -29,8 +29,11 @@ _DEFAULT_FINGERS = ('finger_0', 'finger_1', 'finger_2')
 # a burst), the reader's queue is what keeps the messages, and a keep-last queue drops its
 # oldest silently (1000 deep, a 3 s stall at 500 Hz lost 500 of a reliable topic). Fast DDS
 # holds at most 5000 samples per reader by default (25 s of a 200 Hz topic); past that a
-# reliable reader stops acknowledging and the publisher's own history decides. The queue
-# costs memory only while it is used.
+# reliable reader stops acknowledging and the publisher's own history decides. The queue's
+# memory is not given back when it drains: rmw_fastrtps's history keeps each sample buffer
+# it allocated, at the largest payload it ever held (PREALLOCATED_WITH_REALLOC), so the
+# process keeps the deepest backlog it had, in its largest messages (a reader 180 samples
+# behind on 0.1-1 MB payloads held 110 MiB, drained or not; see README, Soak).
 _HISTORY = HistoryPolicy.KEEP_ALL
 # Most messages taken per topic at a stop: ends a take that races a publisher.
 _STOP_TAKE_LIMIT = 100_000

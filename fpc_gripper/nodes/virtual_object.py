@@ -1,6 +1,5 @@
 """A virtual object in the palm: answers each finger's measured pressure with its contact force."""
 
-import collections
 import functools
 import math
 import struct
@@ -24,8 +23,13 @@ from fpc_gripper.io.config import load_gripper_config
 from fpc_gripper.nodes.guard import InputGuard
 from fpc_gripper.nodes.parameters import float_range
 from fpc_gripper.nodes.runner import run_node
+from fpc_gripper.services.sample_ring import SampleRing
 
-__all__ = ['VirtualObjectNode', 'main']
+__all__ = ['RESIDUAL_SAMPLES', 'VirtualObjectNode', 'main']
+
+#: Tip residuals kept (the newest; some 3 min of shapes in contact at 3 x 200 Hz), in arrays
+#: of fixed size (1.6 MB) allocated at construction.
+RESIDUAL_SAMPLES = 100_000
 
 _RELIABLE = QoSProfile(depth=10, history=HistoryPolicy.KEEP_LAST,
                        reliability=ReliabilityPolicy.RELIABLE)
@@ -90,7 +94,7 @@ class VirtualObjectNode(Node):
         self.virtual = VirtualObject(self.object, config, penalty=0.0 if self.exact
                                      else param('stiffness_n_m').value)
         self.contacts = [None] * len(self._names)
-        self.residuals = collections.deque(maxlen=100000)
+        self.residuals = SampleRing(RESIDUAL_SAMPLES)
         self._pubs = tuple(self.create_publisher(WrenchStamped, f'{n}/tip_force', _RELIABLE)
                            for n in self._names)
         # Raw through the guard, as every node's inputs: size-checked, decoded, and a
@@ -149,12 +153,12 @@ class VirtualObjectNode(Node):
         z = _path_tip_z(data)
         if z is None:
             return
-        self.residuals.append((self.get_clock().now().nanoseconds * 1e-9,
-                               abs(z - contact.tip[1])))
+        self.residuals.append(self.get_clock().now().nanoseconds * 1e-9,
+                              abs(z - contact.tip[1]))
 
     def residual(self, start, end):
         """Largest |Z_tip(model node) - Z_tip(contact)| of the shapes in [start, end] [m]."""
-        return max((r for t, r in self.residuals if start <= t <= end), default=math.nan)
+        return self.residuals.max_between(start, end, default=math.nan)
 
 
 def _path_tip_z(data):
