@@ -37,7 +37,7 @@ def _law_matrix(emc):
 # -- segments -----------------------------------------------------------------------------
 @_jit
 def _density(law, s):
-    """The PEMC energy density F at strain s (column 0 of `_law_matrix`), by Horner."""
+    """Return the PEMC energy density F at strain s (column 0 of `_law_matrix`), by Horner."""
     # F has no constant or linear term (`_law_matrix`): skipping those exact zeros leaves
     # the value bit-identical to the full quintic and saves work in the quadrature loops.
     return (((law[5, 0] * s + law[4, 0]) * s + law[3, 0]) * s + law[2, 0]) * s * s
@@ -45,13 +45,13 @@ def _density(law, s):
 
 @_jit
 def _stress(law, s):
-    """The PEMC stress sigma = F' at strain s (column 1 of `_law_matrix`), by Horner."""
+    """Return the PEMC stress sigma = F' at strain s (column 1 of `_law_matrix`), by Horner."""
     return (((law[4, 1] * s + law[3, 1]) * s + law[2, 1]) * s + law[1, 1]) * s
 
 
 @_jit
 def _tangent(law, s):
-    """The PEMC tangent sigma' at strain s (column 2 of `_law_matrix`, a cubic), by Horner."""
+    """Return the PEMC tangent sigma' at strain s (column 2 of `_law_matrix`, a cubic)."""
     return ((law[3, 2] * s + law[2, 2]) * s + law[1, 2]) * s + law[0, 2]
 
 
