@@ -358,8 +358,8 @@ class CorrectedSolver(PCCSolver):
         return move, jac
 
     def _sheared(self, force):
-        """Whether a tip force (f0, p0) [N] moves the points: a compliance and a force."""
-        return self.correction.shear_compliance != 0.0 and (force[0] != 0.0 or force[1] != 0.0)
+        """Whether a tip force (f0, p0) [N] moves the points: `moves_after_solve` of it."""
+        return self.moves_after_solve(force[0] != 0.0 or force[1] != 0.0)
 
     def moves_after_solve(self, loaded):
         """
@@ -421,7 +421,8 @@ class CorrectedSolver(PCCSolver):
 
         The bordered displacement control does not carry the shear correction.
         """
-        if self.correction.shear_compliance == 0.0:
+        # The control solves a loaded state: refused where that state would move after.
+        if not self.moves_after_solve(True):
             return super().rigidity(*args, **kwargs)
         raise NotImplementedError('CorrectedSolver.rigidity: the bordered displacement '
                                   'control does not include the shear correction; use '
