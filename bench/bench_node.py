@@ -63,12 +63,13 @@ def command_gauge(tick, finger, mode):
 class ModelProcess:
     """The model node in a child process, in its own namespace."""
 
-    def __init__(self, namespace, max_rate_hz, tolerance):
+    def __init__(self, namespace, max_rate_hz, tolerance, parameters=()):
         self.namespace = namespace
+        extra = [arg for p in parameters for arg in ('-p', p)]
         self.process = subprocess.Popen(
             [sys.executable, '-m', 'fpc_gripper.nodes.model_node', '--ros-args',
              '-r', f'__ns:={namespace}', '-p', f'max_rate_hz:={float(max_rate_hz)}',
-             '-p', f'tolerance:={float(tolerance)}'],
+             '-p', f'tolerance:={float(tolerance)}', *extra],
             cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
 
     def cpu_s(self):
@@ -278,6 +279,9 @@ def main(argv=None):
                              'max_rate_hz 1000, 3 fingers x 100/200/500 Hz of distinct '
                              'commands; CPU per answered command and its part outside the '
                              'solver (bench/results/node_per_command.json)')
+    parser.add_argument('--node-param', action='append', default=[], metavar='NAME:=VALUE',
+                        help='a further model_node parameter for --per-command, e.g. '
+                             'rigidity_rate_hz:=0.0 (repeatable)')
     args = parser.parse_args(argv)
     if args.per_command:
         args.tolerance = 5e-5
@@ -380,9 +384,10 @@ def per_command_main(args):
     spinner.start()
     results = {'machine': machine(), 'tolerance_m': args.tolerance, 'solver_us': solve,
                'executor': os.environ.get('FPC_GRIPPER_EXECUTOR', 'default'),
+               'node_parameters': args.node_param,
                'load_average_before': os.getloadavg(), 'rates': {}}
     try:
-        model = ModelProcess('/bench_per_command', 1000.0, args.tolerance)
+        model = ModelProcess('/bench_per_command', 1000.0, args.tolerance, args.node_param)
         driver = Driver(context, '/bench_per_command')
         executor.add_node(driver.node)
         try:
