@@ -10,7 +10,7 @@ from .engine import ALL, Fields, SHAPE
 from .kernels.shear import shear_moves, shear_outputs
 from .section.law import (_add_linear, _box_moments, SECTION_PARAMETERS, SectionLaw,
                           station_layout)
-from .section.segments import share_segments
+from .section.segments import interval_of, share_segments
 from .validation import arc_lengths, real_number
 
 __all__ = ['ContinuumCorrection', 'CorrectedSolver', 'PAPER_PHYSICS', 'CONTINUUM_FIT',
@@ -155,8 +155,7 @@ def corrected_layout(design, correction):
                 cuts.append(edge)
     cuts = np.array(sorted(cuts))
     middle = 0.5 * (cuts[:-1] + cuts[1:])
-    new_types = types[np.clip(np.searchsorted(breaks, middle, side='right') - 1, 0,
-                              types.size - 1)]
+    new_types = types[interval_of(breaks, middle)]
     copies = {}
     for (lo, hi), factor, label, row in zones:
         inside = (middle > lo) & (middle < hi)
@@ -271,7 +270,7 @@ def sheared_positions_at(x, edges, force, compliance, s):
     """
     values, shape = arc_lengths('s', s, edges[-1])
     lengths = np.diff(edges)
-    seg = np.clip(np.searchsorted(edges, values, side='right') - 1, 0, lengths.size - 1)
+    seg = interval_of(edges, values)
     moves = shear_moves(x, lengths, seg.astype(np.int64),
                         np.minimum(values - edges[seg], lengths[seg]), force[0], force[1],
                         compliance)[1]

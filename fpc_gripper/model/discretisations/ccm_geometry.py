@@ -3,6 +3,7 @@
 import numpy as np
 
 from ..kernels import chain
+from ..section.segments import interval_of
 
 __all__ = ['to_scaled', 'from_scaled', 'end_rotation', 'node_positions',
            'material_positions', 'consistent_strain_map', 'consistent_from_strain']
@@ -97,7 +98,7 @@ def material_positions(q, edges, s):
     """
     lengths = np.diff(edges)
     nodes, theta, _ = node_positions(q, lengths)
-    segment = np.clip(np.searchsorted(edges, s, side='right') - 1, 0, lengths.size - 1)
+    segment = interval_of(edges, s)
     xi = ((s - edges[segment]) / lengths[segment])[:, None]
     x, z = _segment_points(q, lengths, nodes, theta, segment, xi)
     return np.concatenate([x, z], axis=1)

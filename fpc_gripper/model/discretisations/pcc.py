@@ -10,7 +10,7 @@ from ..kernels import linear, pcc as kernels
 from ..kernels.pcc_section import half_angle_sinc_kernel, section_arrays
 from ..result import finger_constants
 from ..section.law import station_layout
-from ..section.segments import share_segments
+from ..section.segments import interval_of, share_segments
 from ..validation import arc_lengths
 
 __all__ = ['PCCSolver', 'pcc_edges', 'half_angle_sinc', 'material_jacobian', 'positions_at']
@@ -205,7 +205,7 @@ class PCCSolver(RungSolver):
         # Samples at evenly spaced reference arc length: their segment and the arc length
         # into it depend on the edges alone.
         s = np.linspace(0.0, self.length, self.samples)
-        seg = np.clip(np.searchsorted(self.edges, s, side='right') - 1, 0, n - 1)
+        seg = interval_of(self.edges, s)
         self._sample_segment = seg.astype(np.int64)
         self._sample_offset = s - self.edges[seg]
         # Scale of the angle gradients and Hessian: EI of the stiffest section over L [J].

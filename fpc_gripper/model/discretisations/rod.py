@@ -13,6 +13,7 @@ from ..kernels import rod as rod_kernels
 from ..kernels.pcc_section import section_arrays
 from ..result import finger_constants
 from ..section.law import station_layout
+from ..section.segments import interval_of
 from ..validation import arc_lengths, real_number
 
 __all__ = ['RodSolver']
@@ -230,7 +231,7 @@ class RodSolver(RungSolver):
         Gauss points from its element's start to it (M (Q + 1), p + 1), their element's
         half length and index, Gauss weights (M, Q) [m]).
         """
-        elem = np.clip(np.searchsorted(self.edges, s, side='right') - 1, 0, self.n_elements - 1)
+        elem = interval_of(self.edges, s)
         lo = self.edges[elem]
         xq = self._xq
         sub = lo[:, None] + (s - lo)[:, None] * 0.5 * (xq + 1.0)[None, :]   # (M, Q)

@@ -78,8 +78,11 @@ class RungSolver:
 
     def tip_loads(self, force):
         """Return the engine loads of a tip force (F_X, F_Z) [N]: none when it is zero."""
-        force = np.asarray(force, dtype=float)
-        return [(self.tip_node, force)] if force.any() else []
+        f0, f1 = force
+        # Compared as floats, not through an array reduction: this is on every solve.
+        if f0 == 0.0 and f1 == 0.0:
+            return []
+        return [(self.tip_node, np.array((f0, f1), dtype=float))]
 
     def _force(self, loads):
         """Total tip force (F_X, F_Z) [N] of engine loads (these rungs load the tip only)."""

@@ -5,7 +5,7 @@ import functools
 
 import numpy as np
 
-__all__ = ['SegmentData', 'build_segments', 'share_segments', 'uniform_edges']
+__all__ = ['SegmentData', 'build_segments', 'interval_of', 'share_segments', 'uniform_edges']
 
 # Gauss-Legendre rules exact for the PEMC integrand: degree 10 in x, 5 in z (SPEC "Energy").
 _GL_X = np.polynomial.legendre.leggauss(6)
@@ -101,6 +101,28 @@ def share_segments(spans, n):
     while counts.sum() < n:
         counts[np.argmax(spans / counts)] += 1
     return counts
+
+
+def interval_of(breaks, values):
+    """
+    Return the interval of increasing `breaks` holding each value: breaks[i] <= v < breaks[i + 1].
+
+    A value at the last break, or beyond either end, belongs to the end interval (the
+    segment of an arc length: the tip is in the last one).
+
+    Parameters
+    ----------
+    breaks : ndarray, shape (K + 1,)
+        Increasing.
+    values : ndarray
+
+    Returns
+    -------
+    ndarray of int, shape of `values`
+        In [0, K - 1].
+
+    """
+    return np.clip(np.searchsorted(breaks, values, side='right') - 1, 0, breaks.size - 2)
 
 
 def uniform_edges(length, n_segments, load_points=()):
