@@ -224,6 +224,11 @@ def curvature_message(result):
     return Float64(data=float(result.curvature))
 
 
+def serialized_curvature(result):
+    """Serialize the `curvature_message` of a result to CDR bytes (the per-command path)."""
+    return _CDR_LE + struct.pack('<d', float(result.curvature))
+
+
 def _rigidity_value(value):
     if value is None:
         return math.nan
@@ -289,7 +294,8 @@ def model_messages(result, frame_id, stamp_ns, rigidity=(None, None)):
 
 __all__ += ['GRIPPER_SHAPE_NAMESPACES', 'SHAPE_MARKER_NAMESPACE', 'FingerPlacement',
             'gripper_shape_markers', 'serialized_gripper_shape',
-            'serialized_shape', 'serialized_shape_markers', 'shape_marker']
+            'serialized_curvature', 'serialized_shape', 'serialized_shape_markers',
+            'shape_marker']
 
 #: ``ns`` of the per-finger LINE_STRIP markers on ``markers``; the marker id is the finger index.
 SHAPE_MARKER_NAMESPACE = 'fpc_gripper/shape'

@@ -6,13 +6,7 @@ import sys
 import threading
 import time
 
-from diagnostic_msgs.msg import DiagnosticArray
-from diagnostic_msgs.msg import DiagnosticStatus
-from diagnostic_msgs.msg import KeyValue
-from geometry_msgs.msg import Vector3Stamped
 from geometry_msgs.msg import WrenchStamped
-from nav_msgs.msg import Path
-from rcl_interfaces.msg import SetParametersResult
 from rclpy.clock import Clock
 from rclpy.clock import ClockType
 from rclpy.node import Node
@@ -20,179 +14,28 @@ from rclpy.qos import HistoryPolicy
 from rclpy.qos import qos_profile_sensor_data
 from rclpy.qos import QoSProfile
 from rclpy.qos import ReliabilityPolicy
-from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import FluidPressure
-from std_msgs.msg import Float64
-from visualization_msgs.msg import MarkerArray
 
-from fpc_gripper.io.config import default_gripper_config_path
 from fpc_gripper.io.config import load_gripper_config
-from fpc_gripper.io.messages import curvature_message
 from fpc_gripper.io.messages import FingerPlacement
-from fpc_gripper.io.messages import ns_to_time
-from fpc_gripper.io.messages import rigidity_message
-from fpc_gripper.io.messages import serialized_gripper_shape
-from fpc_gripper.io.messages import serialized_shape
-from fpc_gripper.io.messages import serialized_shape_markers
-from fpc_gripper.io.messages import shape_message
-from fpc_gripper.io.messages import STATE_QOS
-from fpc_gripper.io.tf import palm_transform
-from fpc_gripper.io.tf import serialized_tip_tf
-from fpc_gripper.io.tf import TF_QOS
-from fpc_gripper.io.tf import TF_STATIC_QOS
-from fpc_gripper.model import PRESSURE_MODEL_NAMES
 from fpc_gripper.model.pipeline import finger_model
-from fpc_gripper.model.pipeline import MAX_SEGMENTS
 from fpc_gripper.model.pipeline import ModelSettings
 from fpc_gripper.nodes.guard import InputGuard
+from fpc_gripper.nodes.model_outputs import ModelOutputs
+from fpc_gripper.nodes.model_parameters import check_parameters
+from fpc_gripper.nodes.model_parameters import parameter_table
+from fpc_gripper.nodes.model_parameters import SOLVER_PARAMETERS
 from fpc_gripper.nodes.parameters import BOUND_NAMES
 from fpc_gripper.nodes.parameters import declare_table
-from fpc_gripper.nodes.parameters import float_range
-from fpc_gripper.nodes.parameters import input_bound_table
 from fpc_gripper.nodes.parameters import input_bounds
-from fpc_gripper.nodes.parameters import int_range
 from fpc_gripper.nodes.runner import run_node
-from fpc_gripper.services.input_limits import checked_bounds
 from fpc_gripper.services.logs import NodeLog
-from fpc_gripper.services.model_core import DEFAULT_STALE_AFTER_S
-from fpc_gripper.services.model_core import Level
 from fpc_gripper.services.model_core import ModelCore
-
-PRESSURE_INPUTS = ('command', 'measured')
-# The model settings every consumer of the finger pipeline defaults to.
-_DEFAULTS = ModelSettings()
-_CHOICES = {'pressure_model': PRESSURE_MODEL_NAMES, 'pressure_input': PRESSURE_INPUTS}
-# Parameters whose change rebuilds the solvers.
-_SOLVER_PARAMETERS = ('n_segments', 'pressure_model', 'tolerance')
 
 _COMMAND_QOS = QoSProfile(depth=10, history=HistoryPolicy.KEEP_LAST,
                           reliability=ReliabilityPolicy.RELIABLE)
-_DIAGNOSTICS_QOS = _COMMAND_QOS
 _DIAGNOSTICS_PERIOD_S = 1.0
-# Slow outputs, at most once per period and the last update always sent: markers are for
-# people, and rigidity (two displacement-controlled solves) must not hold up the shapes [s].
-_MARKER_PERIOD_S = 1.0 / 30.0
-# Markers cost some 0.4 ms a send (serialized, three circle fits): with nobody watching,
-# the newest state still reaches the transient-local history, but at 1 Hz.
-_UNWATCHED_MARKER_PERIOD_S = 1.0
 _PALM_FRAME = 'palm'
-_LEVELS = {Level.OK: DiagnosticStatus.OK, Level.WARN: DiagnosticStatus.WARN,
-           Level.ERROR: DiagnosticStatus.ERROR}
-_VALID_COLOR = (0.1, 0.7, 0.2, 1.0)
-_INVALID_COLOR = (1.0, 0.55, 0.0, 1.0)
-
-
-class _SlowOutput:
-    """
-    Fingers whose slow output is out of date, sent at most once per `period_s` [s].
-
-    An update is sent at once when a period has passed since the last send; else a timer of
-    its own (steady time, running only while something is out of date) sends it later, so
-    the last update is always sent and nothing polls in between.
-    """
-
-    def __init__(self, node, period_s, publish, clock, lock):
-        self.period_s = period_s
-        self.publish = publish
-        self.dirty = set()
-        self.last_ns = None
-        self._lock = lock
-        self.timer = node.create_timer(self._timer_period(), self._on_timer, clock=clock)
-        self.timer.cancel()
-
-    def _timer_period(self):
-        return self.period_s if math.isfinite(self.period_s) else 1.0
-
-    def set_period(self, period_s):
-        """Change the period [s] (inf: never sent)."""
-        if period_s != self.period_s:
-            self.period_s = period_s
-            self.timer.timer_period_ns = int(round(self._timer_period() * 1e9))
-            if not math.isfinite(period_s):
-                self.dirty.clear()
-
-    def due(self, now_ns):
-        """Whether a period has passed since the last send [ns]."""
-        return self.last_ns is None or (now_ns - self.last_ns) * 1e-9 >= self.period_s
-
-    def take(self, now_ns):
-        """Mark a send at `now_ns` [ns] and return the out-of-date finger indices."""
-        self.last_ns = now_ns
-        indices = sorted(self.dirty)
-        self.dirty.clear()
-        return indices
-
-    def update(self, indices, now_ns):
-        """Mark fingers out of date and send them if due, else let the timer send them."""
-        if not math.isfinite(self.period_s):
-            return
-        self.dirty.update(indices)
-        if not self.dirty:
-            return
-        if self.due(now_ns):
-            self.publish(self.take(now_ns))
-        elif self.timer.is_canceled():
-            self.timer.reset()
-
-    def _on_timer(self):
-        with self._lock:
-            if self.dirty:
-                self.publish(self.take(time.monotonic_ns()))
-            else:
-                self.timer.cancel()
-
-
-def _parameter_table():
-    """Return ``(name, default, description, extra descriptor fields)`` of every parameter."""
-    return (
-        ('gripper_config', str(default_gripper_config_path()),
-         'Gripper YAML: one set of topics per finger, named and framed finger_<i>.',
-         {'read_only': True}),
-        ('tolerance', _DEFAULTS.tolerance,
-         'Tip-position tolerance against the geometrically exact rod [m]: per scene the node '
-         'uses the cheapest model that meets it (fpc_gripper.model.AdaptiveSolver), refining '
-         'when a segment passes 45 degrees. 0 uses the paper CCM with a fixed n_segments.',
-         {'floating_point_range': float_range(0.0, 0.05)}),
-        ('n_segments', _DEFAULTS.n_segments, 'Number N of CCM segments per finger when '
-         'tolerance is 0; a change rebuilds the solvers.',
-         {'integer_range': int_range(1, MAX_SEGMENTS)}),
-        ('pressure_model', _DEFAULTS.pressure_model,
-         "Pressure work: 'design' (each finger design's pressure_work_factor k_p), "
-         "'adiabatic' (k_p = 1/(gamma - 1) = 2.5, paper eq. 20) or 'isobaric' (k_p = 1); a "
-         'change rebuilds the solvers.',
-         {'additional_constraints': f'one of {list(PRESSURE_MODEL_NAMES)}'}),
-        ('max_rate_hz', 200.0,
-         'Solve-rate cap per finger [Hz]; newer input replaces pending input (latest wins).',
-         {'floating_point_range': float_range(1.0, 10000.0)}),
-        ('pressure_input', 'command',
-         "'command': finger_<i>/pressure_command (reliable); 'measured': finger_<i>/pressure "
-         '(sensor data QoS). Both absolute [Pa].',
-         {'read_only': True, 'additional_constraints': f'one of {list(PRESSURE_INPUTS)}'}),
-        ('atmospheric_pressure', 101325.0,
-         'Atmospheric pressure [Pa]: gauge = absolute - atmospheric_pressure.',
-         {'floating_point_range': float_range(3.0e4, 1.2e5)}),
-        ('stale_after_s', DEFAULT_STALE_AFTER_S,
-         'Inputs whose header stamp is older than this against the node clock are rejected '
-         '[s]; 0 disables. Unstamped (zero) headers are never stale.',
-         {'floating_point_range': float_range(0.0, 3600.0)}),
-        ('future_limit_s', 1.0,
-         'Inputs whose header stamp is more than this ahead of the node clock are rejected '
-         '[s]; 0 disables. Stamps that are no time (sec < 0, nanosec >= 1e9) always are.',
-         {'floating_point_range': float_range(0.0, 3600.0)}),
-        ('rigidity_rate_hz', 10.0,
-         "Largest rate of each finger's rigidity output [Hz]: K_x and K_z take two "
-         "displacement-controlled solves at the state's pressure; 0 publishes none.",
-         {'floating_point_range': float_range(0.0, 100.0)}),
-        ('frame_prefix', '',
-         'Prefix of every frame id published or expected (<prefix>palm, <prefix>finger_<i>), '
-         'so that two grippers can share a tf tree, e.g. "left/".',
-         {'read_only': True}),
-        ('publish_tf', True,
-         'Send tf: the mounts palm -> finger_<i> on /tf_static, and finger_<i> -> '
-         'finger_<i>_tip on /tf with every shape.',
-         {'read_only': True}),
-        *input_bound_table(),
-    )
 
 
 class ModelNode(Node):
@@ -256,10 +99,10 @@ class ModelNode(Node):
             raise
 
     def _set_up(self, solver_factory):
-        declare_table(self, _parameter_table())
+        declare_table(self, parameter_table())
         # Overrides bypass the on-set callback: check the starting values the same way.
         result = self._validate_parameters([self.get_parameter(n)
-                                            for n, *_ in _parameter_table()])
+                                            for n, *_ in parameter_table()])
         if not result.successful:
             raise ValueError(result.reason)
         self._solver_factory = solver_factory or finger_model
@@ -290,19 +133,16 @@ class ModelNode(Node):
         self._palm_frame = prefix + _PALM_FRAME
         self._placements = tuple(FingerPlacement(config.palm_radius, f.mount_angle)
                                  for f in config.fingers)
-        self._markers = _SlowOutput(self, _UNWATCHED_MARKER_PERIOD_S, self._publish_markers,
-                                    self._steady, self._lock)
-        self._rigidities = _SlowOutput(self, self._rigidity_period(), self._publish_rigidities,
-                                       self._steady, self._lock)
-        self._last_kinds = None
-        self._serialize_shapes = None
-        self._create_topics(names)
-        self._tf_pub, tf_state = self._create_tf()
+        self._outputs = ModelOutputs(self, self._core, self._frames, self._palm_frame,
+                                     self._placements, self._lock, self._steady,
+                                     self._now_ns, self._rigidity_period(),
+                                     param('publish_tf').value)
+        self._subscribe_inputs(names)
         self._rate_timer = self.create_timer(1.0 / param('max_rate_hz').value, self._on_timer,
                                              clock=self._steady)
         self._rate_timer.cancel()
         self._diagnostics_timer = self.create_timer(
-            _DIAGNOSTICS_PERIOD_S, functools.partial(self._publish_diagnostics, True),
+            _DIAGNOSTICS_PERIOD_S, functools.partial(self._outputs.publish_diagnostics, True),
             clock=self._steady)
         self.add_on_set_parameters_callback(self._validate_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
@@ -312,9 +152,9 @@ class ModelNode(Node):
             f'{param("pressure_model").value} pressure model, '
             f'input {self._pressure_topic}, max_rate_hz {param("max_rate_hz").value:g}, '
             f'frames {self._palm_frame} -> {", ".join(self._frames)} '
-            f'({tf_state}); '
+            f'({self._outputs.tf_state}); '
             'waiting for pressure input')
-        self._publish_diagnostics(force=True)
+        self._outputs.publish_diagnostics(force=True)
 
     # -- public helpers ---------------------------------------------------------------------
 
@@ -363,19 +203,7 @@ class ModelNode(Node):
 
     # -- set-up -----------------------------------------------------------------------------
 
-    def _create_topics(self, names):
-        self._shape_pubs = tuple(self.create_publisher(Path, f'{name}/shape', STATE_QOS)
-                                 for name in names)
-        self._curvature_pubs = tuple(
-            self.create_publisher(Float64, f'{name}/curvature', STATE_QOS) for name in names)
-        self._rigidity_pubs = tuple(
-            self.create_publisher(Vector3Stamped, f'{name}/rigidity', STATE_QOS)
-            for name in names)
-        self._markers_pub = self.create_publisher(MarkerArray, 'markers', STATE_QOS)
-        self._gripper_shape_pub = self.create_publisher(MarkerArray, 'gripper_shape',
-                                                        STATE_QOS)
-        self._diagnostics_pub = self.create_publisher(DiagnosticArray, '/diagnostics',
-                                                      _DIAGNOSTICS_QOS)
+    def _subscribe_inputs(self, names):
         if self.get_parameter('pressure_input').value == 'measured':
             self._pressure_topic, qos = 'pressure', qos_profile_sensor_data
         else:
@@ -395,36 +223,6 @@ class ModelNode(Node):
             functools.partial(self._on_refused, index, topic),
             functools.partial(self._on_lost, index, topic))
 
-    def _create_tf(self):
-        """
-        Send palm -> finger_<i> on /tf_static; return the /tf publisher and what was done.
-
-        tf2_ros's static broadcaster sends them where it imports. Otherwise the node
-        publishes tf2_msgs/TFMessage itself, with tf2_ros's QoS (a PyPI install gets
-        tf2_msgs from scripts/build_interfaces.sh). Without tf2_msgs there is no tf.
-        """
-        if not self.get_parameter('publish_tf').value:
-            return None, 'publish_tf false: no tf'
-        try:
-            from tf2_msgs.msg import TFMessage
-        except ImportError:
-            return None, 'tf2_msgs not importable: no tf'
-        stamp = self._now_ns()
-        mounts = [palm_transform(placement, self._palm_frame, frame, stamp)
-                  for placement, frame in zip(self._placements, self._frames)]
-        try:
-            from tf2_ros.static_transform_broadcaster import StaticTransformBroadcaster
-        except ImportError:
-            self._static_tf_pub = self.create_publisher(TFMessage, '/tf_static', TF_STATIC_QOS)
-            self._static_tf_pub.publish(TFMessage(transforms=mounts))
-            how = 'tf2_msgs'
-        else:
-            self._static_tf_pub = StaticTransformBroadcaster(self)
-            self._static_tf_pub.sendTransform(mounts)
-            how = 'tf2_ros'
-        return (self.create_publisher(TFMessage, '/tf', TF_QOS),
-                f'tf through {how}: mounts on /tf_static, finger -> tip on /tf')
-
     def _rigidity_period(self):
         rate = self.get_parameter('rigidity_rate_hz').value
         return 1.0 / rate if rate > 0.0 else math.inf
@@ -432,23 +230,7 @@ class ModelNode(Node):
     # -- parameters -------------------------------------------------------------------------
 
     def _validate_parameters(self, parameters):
-        for param in parameters:
-            value = param.value
-            if param.name in _CHOICES and value not in _CHOICES[param.name]:
-                return SetParametersResult(
-                    successful=False,
-                    reason=f'`{param.name}` must be one of {list(_CHOICES[param.name])}, '
-                           f'got {value!r}')
-            if isinstance(value, float) and not math.isfinite(value):
-                return SetParametersResult(
-                    successful=False, reason=f'`{param.name}` must be finite, got {value}')
-        bounds = {p.name: p.value for p in parameters if p.name in BOUND_NAMES}
-        if bounds:
-            try:
-                checked_bounds(input_bounds(self, bounds), getattr(self, '_frames', ()))
-            except (TypeError, ValueError) as exc:
-                return SetParametersResult(successful=False, reason=str(exc))
-        return SetParametersResult(successful=True)
+        return check_parameters(self, parameters, getattr(self, '_frames', ()))
 
     def _apply_parameters(self, parameters):
         values = {p.name: p.value for p in parameters}
@@ -466,8 +248,8 @@ class ModelNode(Node):
                 self._core.max_rate_hz = values['max_rate_hz']
                 self._rate_timer.timer_period_ns = int(round(1e9 / values['max_rate_hz']))
             if 'rigidity_rate_hz' in values:
-                self._rigidities.set_period(self._rigidity_period())
-            if values.keys() & set(_SOLVER_PARAMETERS):
+                self._outputs.set_rigidity_period(self._rigidity_period())
+            if values.keys() & set(SOLVER_PARAMETERS):
                 self._core.rebuild(self._create_solver)
                 self.get_logger().info(
                     f'solvers rebuilt: tolerance {self.get_parameter("tolerance").value} m, '
@@ -478,7 +260,10 @@ class ModelNode(Node):
     # -- inputs -----------------------------------------------------------------------------
 
     def _now_ns(self):
-        return self.get_clock().now().nanoseconds
+        # The rcl clock's reading (ROS time, simulated or not) without rclpy's Time object.
+        clock = self.get_clock().handle
+        with clock:
+            return clock.get_now().nanoseconds
 
     def _on_pressure(self, index, msg):
         header = msg.header
@@ -513,7 +298,7 @@ class ModelNode(Node):
             self._log.warning(
                 f'{name}/{topic} rejected ({check.rejection.value}), keeping the last good '
                 f'state: {check.detail}', key=(index, check.rejection))
-            self._publish_diagnostics()
+            self._outputs.publish_diagnostics()
             return
         self._run(self._core.ready(time.monotonic_ns()))
         if self._core.pending:
@@ -536,11 +321,7 @@ class ModelNode(Node):
         updates = self._core.process(indices, time.monotonic_ns())
         if not updates:
             return
-        good = [u for u in updates if u.result is not None]
-        for update in good:
-            self._publish_shape(update)
-        for update in good:
-            self._curvature_pubs[update.index].publish(curvature_message(update.result))
+        self._outputs.publish(updates)
         for update in updates:
             if update.result is None:
                 state = self._core.fingers[update.index]
@@ -548,72 +329,6 @@ class ModelNode(Node):
                     f'{state.name}: solve at {state.gauge:.1f} Pa gauge, tip force '
                     f'({state.tip_force[0]:g}, {state.tip_force[1]:g}) N failed, keeping the '
                     f'last good state: {update.failure}', key=(update.index, 'solver'))
-        self._publish_diagnostics()
-        indices = [u.index for u in good]
-        now = time.monotonic_ns()
-        watched = (self._markers_pub.get_subscription_count()
-                   or self._gripper_shape_pub.get_subscription_count())
-        self._markers.set_period(_MARKER_PERIOD_S if watched else _UNWATCHED_MARKER_PERIOD_S)
-        self._markers.update(indices, now)
-        self._rigidities.update(indices, now)
-
-    def _shape_payload(self, result, frame_id, stamp_ns):
-        if self._serialize_shapes is None:
-            # The fast serializer must decode to the reference message; else fall back.
-            reference = shape_message(result, frame_id, stamp_ns)
-            decoded = deserialize_message(serialized_shape(result, frame_id, stamp_ns), Path)
-            self._serialize_shapes = decoded == reference
-            if not self._serialize_shapes:
-                self.get_logger().warning('serialized_shape does not decode to shape_message; '
-                                          'publishing Path objects (slower)')
-        if self._serialize_shapes:
-            return serialized_shape(result, frame_id, stamp_ns)
-        return shape_message(result, frame_id, stamp_ns)
-
-    def _publish_shape(self, update):
-        frame = self._frames[update.index]
-        self._shape_pubs[update.index].publish(
-            self._shape_payload(update.result, frame, update.stamp_ns))
-        if self._tf_pub is not None:
-            self._tf_pub.publish(serialized_tip_tf(update.result, frame, update.stamp_ns))
-
-    def _publish_rigidities(self, indices):
-        for index in indices:
-            state = self._core.fingers[index]
-            if state.result is None:
-                continue
-            k_x = self._core.rigidity(index, 'x')
-            k_z = self._core.rigidity(index, 'z')
-            self._rigidity_pubs[index].publish(
-                rigidity_message(k_x, k_z, self._frames[index], state.result_stamp_ns))
-
-    def _publish_markers(self, indices):
-        """Send ``markers`` and ``gripper_shape`` with every finger that has a state."""
-        fingers = [
-            (i, state.result, state.result_stamp_ns, self._placements[i],
-             _VALID_COLOR if state.result.valid else _INVALID_COLOR)
-            for i, state in enumerate(self._core.fingers) if state.result is not None]
-        if not fingers:
-            return
-        self._markers_pub.publish(serialized_shape_markers(fingers, self._palm_frame))
-        self._gripper_shape_pub.publish(serialized_gripper_shape(fingers, self._palm_frame))
-
-    def _publish_diagnostics(self, force=False):
-        with self._lock:
-            kinds = tuple(self._core.health(i) for i in range(len(self._core.fingers)))
-            if not force and kinds == self._last_kinds:
-                return
-            self._last_kinds = kinds
-            statuses = [self._core.status(i) for i in range(len(kinds))]
-            array = DiagnosticArray()
-            array.header.stamp = ns_to_time(self._now_ns())
-            array.status = [
-                DiagnosticStatus(
-                    level=_LEVELS[s.level], name=f'{self.get_fully_qualified_name()}: {name}',
-                    message=s.message, hardware_id=name,
-                    values=[KeyValue(key=k, value=v) for k, v in s.values.items()])
-                for name, s in zip(self._core.names, statuses)]
-            self._diagnostics_pub.publish(array)
 
 
 def main(args=None):

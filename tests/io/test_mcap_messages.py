@@ -1,6 +1,7 @@
 """Message builders shared by replay-model and the model node."""
 
 import math
+import struct
 
 from mcap_ros2._dynamic import generate_dynamic
 from mcap_test_utils import FakeResult
@@ -9,13 +10,15 @@ import numpy as np
 from numpy.testing import assert_allclose
 import pytest
 from rclpy.serialization import deserialize_message, serialize_message
+from std_msgs.msg import Float64
 from visualization_msgs.msg import Marker, MarkerArray
 
 from fpc_gripper.io.mcap_writer import message_definition
-from fpc_gripper.io.messages import (FingerPlacement, gripper_shape_markers,
+from fpc_gripper.io.messages import (curvature_message, FingerPlacement, gripper_shape_markers,
                                      GRIPPER_SHAPE_NAMESPACES, gripper_topics,
                                      MAX_CIRCLE_RADIUS, ns_to_time, rigidity_message,
-                                     serialized_gripper_shape, serialized_shape,
+                                     serialized_curvature, serialized_gripper_shape,
+                                     serialized_shape,
                                      serialized_shape_markers, shape_marker, shape_message,
                                      tangent_angles, time_to_ns)
 
@@ -62,6 +65,17 @@ def test_serialized_shape_decodes_to_the_path(frame_id, n):
     decode = generate_dynamic('nav_msgs/msg/Path', message_definition('nav_msgs/msg/Path'))
     decoded = decode['nav_msgs/msg/Path'](data)
     assert [p.pose.position.z for p in decoded.poses] == list(result.points[:, 1])
+
+
+@pytest.mark.parametrize('kappa', [0.0, -0.0, 12.5, -30.0, 1e-300, math.inf])
+def test_serialized_curvature_decodes_to_the_message(kappa):
+    result = FakeResult(kappa)
+    data = serialized_curvature(result)
+    reference = curvature_message(result)
+    assert data == serialize_message(reference)
+    decoded = deserialize_message(data, Float64)
+    # Exact: a double stored verbatim; compared as bits (signed zero included).
+    assert struct.pack('<d', decoded.data) == struct.pack('<d', reference.data)
 
 
 def test_rigidity_and_marker():

@@ -600,7 +600,7 @@ def test_late_subscribers_get_the_newest_state_and_volatile_ones_connect(ros, mo
             publishers = other.node.get_publishers_info_by_topic(f'/m/{topic}')
             assert [i.node_name for i in publishers] == ['model_node'], topic
         assert other.count() == 0
-    assert all(p.get_subscription_count() >= 3 for p in node._shape_pubs)
+    assert all(p.get_subscription_count() >= 3 for p in node._outputs.shape_publishers)
     # ... but every answer to a new input.
     stamp = probe.send_pressure('finger_1', ATM + 140e3)
     for other in (volatile, best_effort):

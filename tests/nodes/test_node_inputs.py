@@ -104,8 +104,8 @@ class ModelRig:
             Parameter('max_rate_hz', value=10000.0)])
         self.log = Tee(self.node.get_logger())
         self.node._log._logger = self.log
-        self.shapes = [record(p) for p in self.node._shape_pubs]
-        self.diagnostics = record(self.node._diagnostics_pub)
+        self.shapes = [record(p) for p in self.node._outputs.shape_publishers]
+        self.diagnostics = record(self.node._outputs.diagnostics_publisher)
 
     def now(self):
         ns = self.node.get_clock().now().nanoseconds
