@@ -45,6 +45,8 @@ ROOT = pathlib.Path(__file__).resolve().parents[1]
 TARGETS = {'p50_ms': 5.0, 'p99_ms': 20.0, 'sustained_hz': 200.0}
 FINGERS = ('finger_0', 'finger_1', 'finger_2')
 ATM = 101325.0
+#: Per-finger command rates of the per-command runs [Hz].
+RATES = (100.0, 200.0, 500.0)
 #: Output/input ratio below which the node has fallen behind.
 KEEP_UP = 0.95
 #: Commands as the conventions say (reliable, depth 10).
@@ -88,6 +90,16 @@ class ModelProcess:
         if self.process.returncode != 0:
             print(f'model node exited with {self.process.returncode}:\n{err[-2000:]}',
                   file=sys.stderr)
+
+
+class FloorProcess(ModelProcess):
+    """bench/floor_node.py in a child process: rclpy's own cost per command, no model."""
+
+    def __init__(self, namespace):
+        self.namespace = namespace
+        self.process = subprocess.Popen(
+            [sys.executable, str(ROOT / 'bench' / 'floor_node.py'), namespace], cwd=ROOT,
+            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
 
 
 class Driver:
@@ -375,7 +387,12 @@ def main(argv=None):
 
 
 def per_command_main(args):
-    """Run issue 22's per-command measurement and write its JSON."""
+    """
+    Run issue 22's per-command measurement and write its JSON.
+
+    Also measured, in the same run: the floor, bench/floor_node.py's CPU per command
+    (a raw take and one raw publish, no Python work), which no rclpy node goes below.
+    """
     solve = solver_us(args.tolerance)
     context = Context()
     rclpy.init(context=context)
@@ -387,6 +404,21 @@ def per_command_main(args):
                'node_parameters': args.node_param,
                'load_average_before': os.getloadavg(), 'rates': {}}
     try:
+        # The floor first: the same driver, commands and QoS against a node that only takes
+        # each command raw and publishes fixed shape bytes.
+        floor = {}
+        process = FloorProcess('/bench_floor')
+        driver = Driver(context, '/bench_floor')
+        executor.add_node(driver.node)
+        try:
+            if not driver.wait_for_initial_state():
+                raise RuntimeError('the floor node published nothing')
+            driver.drive(100.0, 1.0, 'distinct')
+            for rate in RATES:
+                floor[rate] = per_command_run(driver, process, rate, args.duration,
+                                              args.repeats, 0.0)['cpu_per_command_us']
+        finally:
+            process.stop()
         model = ModelProcess('/bench_per_command', 1000.0, args.tolerance, args.node_param)
         driver = Driver(context, '/bench_per_command')
         executor.add_node(driver.node)
@@ -394,9 +426,11 @@ def per_command_main(args):
             if not driver.wait_for_initial_state():
                 raise RuntimeError('the model node published no initial state')
             driver.drive(100.0, 1.0, 'distinct')
-            for rate in (100.0, 200.0, 500.0):
-                results['rates'][str(int(rate))] = per_command_run(
-                    driver, model, rate, args.duration, args.repeats, solve)
+            for rate in RATES:
+                row = per_command_run(driver, model, rate, args.duration, args.repeats, solve)
+                row['floor_us'] = floor[rate]
+                row['above_floor_us'] = row['outside_solver_us'] - floor[rate]
+                results['rates'][str(int(rate))] = row
         finally:
             model.stop()
     finally:
@@ -407,11 +441,12 @@ def per_command_main(args):
     args.output.write_text(json.dumps(results, indent=2) + '\n')
     print(f'in-process solve per command: {solve:.0f} us')
     print(f'{"3 fingers x":<14}{"node CPU":>9}{"answered":>9}{"p50 ms":>8}{"p99 ms":>8}'
-          f'{"CPU/cmd us":>11}{"outside solver us":>18}')
+          f'{"CPU/cmd us":>11}{"outside solver":>15}{"floor":>7}{"above floor":>12}')
     for rate, row in results['rates'].items():
         print(f'{rate + " Hz":<14}{row["node_cpu"]:>9.2f}{row["answered_ratio"]:>9.3f}'
               f'{row["p50_ms"]:>8.2f}{row["p99_ms"]:>8.2f}{row["cpu_per_command_us"]:>11.0f}'
-              f'{row["outside_solver_us"]:>18.0f}')
+              f'{row["outside_solver_us"]:>15.0f}{row["floor_us"]:>7.0f}'
+              f'{row["above_floor_us"]:>12.0f}')
     print(f'wrote {args.output}')
     return 0
 

@@ -1,0 +1,53 @@
+"""The least an rclpy node does per command: a raw take, and one shape's bytes published raw."""
+
+# Started by bench_node.py --per-command beside the model node, with the same executor
+# (rclpy's EventsExecutor), QoS and topics, so that its CPU per command is the floor that
+# rclpy and the middleware put under any Python node on this machine.
+
+import signal
+import sys
+
+from nav_msgs.msg import Path
+import rclpy
+from rclpy.experimental import EventsExecutor
+from rclpy.node import Node
+from rclpy.signals import SignalHandlerOptions
+from sensor_msgs.msg import FluidPressure
+
+from fpc_gripper.io.messages import serialized_shape, STATE_QOS
+from fpc_gripper.model import ActuatorDesign
+from fpc_gripper.model.pipeline import finger_model
+from fpc_gripper.nodes.model_node import _COMMAND_QOS
+
+FINGERS = 3
+
+
+def main(namespace):
+    rclpy.init(args=[], signal_handler_options=SignalHandlerOptions.NO)
+    node = Node('floor_node', namespace=namespace)
+    shape = bytearray(serialized_shape(finger_model(ActuatorDesign()).solve(1e5),
+                                       'finger_0', 0))
+    pubs = [node.create_publisher(Path, f'finger_{i}/shape', STATE_QOS) for i in range(FINGERS)]
+
+    def answer(i):
+        def callback(payload):
+            shape[4:12] = payload[4:12]   # the command's header stamp
+            pubs[i].publish(bytes(shape))
+        return callback
+
+    for i in range(FINGERS):
+        node.create_subscription(FluidPressure, f'finger_{i}/pressure_command', answer(i),
+                                 _COMMAND_QOS, raw=True)
+    executor = EventsExecutor()
+    executor.add_node(node)
+    stop = []
+    signal.signal(signal.SIGINT, lambda *_: stop.append(True))
+    while not stop:
+        executor.spin_once(timeout_sec=0.1)
+    executor.shutdown()
+    node.destroy_node()
+    rclpy.try_shutdown()
+
+
+if __name__ == '__main__':
+    main(sys.argv[1])
