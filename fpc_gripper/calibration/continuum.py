@@ -9,6 +9,7 @@ from .fit import _ModelFailure, CalibrationStatus, least_squares_fit, solve_scen
 from ..model.corrected import (COMPLIANCE_BOUNDS, ContinuumCorrection, CorrectedSolver,
                                FACTOR_BOUNDS, PAPER_PHYSICS, PARAMETERS)
 from ..model.design import ActuatorDesign
+from ..model.validation import integer
 
 __all__ = ['CORRECTION_NAMES', 'CORRECTION_UNITS', 'FEScene', 'fe_scenes', 'correction_tips',
            'fit_correction', 'CorrectionFit', 'rounded']
@@ -193,9 +194,7 @@ def fit_correction(scenes, start=PAPER_PHYSICS, design=None, max_nfev=60):
     CorrectionFit
 
     """
-    if isinstance(max_nfev, bool) or not isinstance(max_nfev, (int, np.integer)) \
-            or max_nfev < 1:
-        raise ValueError(f'`max_nfev` must be an integer >= 1, got {max_nfev!r}')
+    integer('max_nfev', max_nfev, 1)
     problem = _CorrectionProblem(scenes, design)
     lower = np.array([FACTOR_BOUNDS[0]] * 3 + [COMPLIANCE_BOUNDS[0]]) / _SCALE
     upper = np.array([FACTOR_BOUNDS[1]] * 3 + [COMPLIANCE_BOUNDS[1]]) / _SCALE

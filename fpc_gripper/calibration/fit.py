@@ -15,6 +15,7 @@ from ..model.design import ActuatorDesign
 from ..model.discretisations.ccm import AXES
 from ..model.pipeline import finger_model, ModelSettings
 from ..model.section.materials import emc_stress
+from ..model.validation import integer
 
 __all__ = ['calibrate', 'pcc_model', 'CalibrationResult', 'CalibrationStatus', 'FIT_SEGMENTS',
            'DEFAULT_FIT', 'IDENTIFIABLE_RSE', 'least_squares_fit', 'solve_scene']
@@ -564,9 +565,8 @@ def calibrate(design, markers=None, loading=None, tensile=None, fit=DEFAULT_FIT,
     if 'emc' in params.names and tensile is None:
         warnings.append('`emc` is fitted without tensile data: only the shapes and forces '
                         'constrain the PEMC law')
-    for name, value in (('n_segments', n_segments), ('max_nfev', max_nfev)):
-        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
-            raise ValueError(f'`{name}` must be an integer >= 1, got {value!r}')
+    integer('n_segments', n_segments, 1)
+    integer('max_nfev', max_nfev, 1)
     problem = _Problem(params, markers, loading, tensile, noise, int(n_segments))
     settings = {'fit': list(params.names), 'noise': noise, 'loss': 'soft_l1',
                 'model': f'pcc N={n_segments}', 'n_segments': int(n_segments)}

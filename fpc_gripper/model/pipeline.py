@@ -10,7 +10,7 @@ from .corrected import CONTINUUM_FIT, CorrectedSolver
 from .design import ActuatorDesign
 from .result import rung_label
 from .selection import AdaptiveSolver, make_solver, RUNGS
-from .validation import check_pressure_model
+from .validation import check_pressure_model, integer
 
 __all__ = ['PHYSICS',
            'DEFAULT_TOLERANCE', 'DEFAULT_N_SEGMENTS', 'MAX_SEGMENTS', 'MAX_RUNG_SEGMENTS',
@@ -78,10 +78,7 @@ class ModelSettings:
             raise ValueError(f"`rung` must be 'auto' or one of {list(RUNGS)}, "
                              f'got {self.rung!r}')
         top = MAX_SEGMENTS if self.rung == 'auto' else MAX_RUNG_SEGMENTS
-        n = self.n_segments
-        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or not 1 <= n <= top:
-            raise ValueError(f'`n_segments` must be an integer in [1, {top}], got {n!r}')
-        object.__setattr__(self, 'n_segments', int(n))
+        object.__setattr__(self, 'n_segments', integer('n_segments', self.n_segments, 1, top))
         object.__setattr__(self, 'pressure_model', check_pressure_model(self.pressure_model))
 
     @property

@@ -98,6 +98,36 @@ def real_number(name, value, unit):
     return number
 
 
+def integer(name, value, low, high=None, unit=''):
+    """
+    Return `value` as an int in [low, high], or raise naming the argument, value and unit.
+
+    Parameters
+    ----------
+    name : str
+        Argument name, as the caller spells it.
+    value : object
+        Anything; numpy integers are accepted, bools are not.
+    low : int
+    high : int, optional
+        None for no upper bound.
+    unit : str
+        Unit in brackets, e.g. '[samples]', or ''.
+
+    Raises
+    ------
+    ValueError
+        If `value` is no integer in range.
+
+    """
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)) \
+            or value < low or (high is not None and value > high):
+        bound = f'>= {low}' if high is None else f'in [{low}, {high}]'
+        raise ValueError(f'`{name}` must be an integer {bound}{" " * bool(unit)}{unit}, '
+                         f'got {value!r}')
+    return int(value)
+
+
 def real_pair(name, value, unit):
     """
     Return `value` as a pair of floats, or raise naming the argument, value and unit.

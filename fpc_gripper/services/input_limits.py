@@ -9,6 +9,7 @@ from fpc_gripper.model.validation import ArgumentError
 from fpc_gripper.model.validation import check_force
 from fpc_gripper.model.validation import ENVELOPE
 from fpc_gripper.model.validation import InputLimits
+from fpc_gripper.model.validation import integer
 from fpc_gripper.services.logs import bounded
 
 __all__ = ['DEFAULT_BOUNDS', 'InputBounds', 'InputCheck', 'MAX_STAMP_NS', 'MAX_STAMP_SEC',
@@ -90,9 +91,7 @@ def _shown(text):
 
 
 def _positive_int(name, value, low, unit):
-    if isinstance(value, bool) or not isinstance(value, int) or value < low:
-        raise ValueError(f'`{name}` must be an integer >= {low} {unit}, got {value!r}')
-    return value
+    return integer(name, value, low, unit=unit)
 
 
 @dataclasses.dataclass(frozen=True)

@@ -2,6 +2,8 @@
 
 import numpy as np
 
+from fpc_gripper.model.validation import integer
+
 __all__ = ['SampleRing']
 
 
@@ -23,10 +25,7 @@ class SampleRing:
     """
 
     def __init__(self, capacity):
-        if isinstance(capacity, bool) or not isinstance(capacity, (int, np.integer)) \
-                or capacity < 1:
-            raise ValueError(f'`capacity` must be an integer >= 1 [samples], got {capacity!r}')
-        self.capacity = int(capacity)
+        self.capacity = integer('capacity', capacity, 1, unit='[samples]')
         # Zeros, not empty: the pages are touched now, so the footprint is there from
         # the start instead of arriving with the samples.
         self._times = np.zeros(self.capacity)

@@ -101,3 +101,24 @@ def test_random_in_range_scenes_never_raise_and_successes_are_equilibria():
                 seen['failed'] += 1
                 assert result.message
     assert seen['success'] >= 70
+
+
+@pytest.mark.parametrize('make, words', [
+    (lambda: CCMSolver(PAPER, 0), '`n_segments` must be an integer >= 1, got 0'),
+    (lambda: CCMSolver(PAPER, True), '`n_segments` must be an integer >= 1, got True'),
+    (lambda: CCMSolver(PAPER, 8.0), '`n_segments` must be an integer >= 1, got 8.0'),
+    (lambda: CCMSolver(PAPER, 8, max_iterations=1), '`max_iterations` must be an integer >= 2'),
+    (lambda: PCCSolver(PAPER, -3), '`n_segments` must be an integer >= 1, got -3'),
+    (lambda: PCCSolver(PAPER, 22, samples=2), '`samples` must be an integer >= 3, got 2'),
+    (lambda: RodSolver(PAPER, degree=np.int64(1)), '`degree` must be an integer >= 2'),
+    (lambda: ModelSettings(n_segments=10**6), '`n_segments` must be an integer in [1, '),
+])
+def test_integer_arguments_are_refused_by_name(make, words):
+    with pytest.raises(ValueError) as info:
+        make()
+    assert words in str(info.value)
+
+
+def test_numpy_integers_are_integers():
+    assert CCMSolver(PAPER, np.int32(4)).n_segments == 4
+    assert isinstance(ModelSettings(n_segments=np.int64(8)).n_segments, int)

@@ -15,7 +15,7 @@ from ..kernels.chain import load_arrays, node_jacobian
 from ..result import finger_constants, finger_result, Result
 from ..section.segments import build_segments, uniform_edges
 from ..validation import (arc_lengths, check_force, check_load, check_outputs,
-                          check_pressure_model, PRESSURE_MODELS, real_number,
+                          check_pressure_model, integer, PRESSURE_MODELS, real_number,
                           warm_start_allowed)
 
 __all__ = ['CCMSolver', 'SolverStatus', 'AXES', 'check_rigidity', 'rigidity_result',
@@ -143,13 +143,9 @@ class CCMSolver:
         if not isinstance(design, ActuatorDesign):
             raise TypeError(f'`design` must be an ActuatorDesign, got {type(design).__name__}')
         pressure_model = check_pressure_model(pressure_model)
-        if isinstance(n_segments, bool) or not isinstance(n_segments, (int, np.integer)) \
-                or n_segments < 1:
-            raise ValueError(f'`n_segments` must be an integer >= 1, got {n_segments!r}')
-        for name, value in (('samples_per_segment', samples_per_segment),
-                            ('max_iterations', max_iterations)):
-            if not isinstance(value, (int, np.integer)) or value < 2:
-                raise ValueError(f'`{name}` must be an integer >= 2, got {value!r}')
+        integer('n_segments', n_segments, 1)
+        integer('samples_per_segment', samples_per_segment, 2)
+        integer('max_iterations', max_iterations, 2)
         if reconstruction not in RECONSTRUCTIONS:
             raise ValueError(f'`reconstruction` must be one of {RECONSTRUCTIONS}, '
                              f'got {reconstruction!r}')

@@ -11,7 +11,7 @@ from ..kernels.pcc_section import half_angle_sinc_kernel, section_arrays
 from ..result import finger_constants
 from ..section.law import station_layout
 from ..section.segments import interval_of, share_segments
-from ..validation import arc_lengths
+from ..validation import arc_lengths, integer
 
 __all__ = ['PCCSolver', 'pcc_edges', 'half_angle_sinc', 'material_jacobian', 'positions_at']
 
@@ -192,9 +192,7 @@ class PCCSolver(RungSolver):
     def __init__(self, design, n_segments=64, pressure_model=None, tol=1e-12,
                  samples=129, max_iterations=60):
         check_common(design, pressure_model, samples)
-        if isinstance(n_segments, bool) or not isinstance(n_segments, (int, np.integer)) \
-                or n_segments < 1:
-            raise ValueError(f'`n_segments` must be an integer >= 1, got {n_segments!r}')
+        integer('n_segments', n_segments, 1)
         set_common(self, design, pressure_model, tol, samples, max_iterations)
         self.edges, self.segment_types, self.law = self._layout(design, n_segments)
         self.lengths = np.diff(self.edges)

@@ -14,7 +14,7 @@ from ..kernels.pcc_section import section_arrays
 from ..result import finger_constants
 from ..section.law import station_layout
 from ..section.segments import interval_of
-from ..validation import arc_lengths, real_number
+from ..validation import arc_lengths, integer, real_number
 
 __all__ = ['RodSolver']
 
@@ -169,9 +169,7 @@ class RodSolver(RungSolver):
     def __init__(self, design, pressure_model=None, tol=1e-10, ribs='exact', degree=8,
                  max_element_length=0.010, samples=129, max_iterations=60):
         check_common(design, pressure_model, samples)
-        if isinstance(degree, bool) or not isinstance(degree, (int, np.integer)) \
-                or degree < 2:
-            raise ValueError(f'`degree` must be an integer >= 2, got {degree!r}')
+        integer('degree', degree, 2)
         max_element_length = real_number('max_element_length', max_element_length, '[m]')
         if max_element_length <= 0.0:
             raise ValueError(f'`max_element_length` must be > 0 [m], got {max_element_length}')

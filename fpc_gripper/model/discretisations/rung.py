@@ -10,8 +10,8 @@ from ..design import ActuatorDesign
 from ..engine import SolverStatus
 from ..kernels.circle import circle_fit
 from ..result import finger_result, Result
-from ..validation import (check_load, check_outputs, check_pressure_model, OUTPUT_LEVELS,
-                          warm_start_allowed)
+from ..validation import (check_load, check_outputs, check_pressure_model, integer,
+                          OUTPUT_LEVELS, warm_start_allowed)
 
 __all__ = ['RungSolver', 'check_common', 'set_common']
 
@@ -34,8 +34,7 @@ def check_common(design, pressure_model, samples):
     if not isinstance(design, ActuatorDesign):
         raise TypeError(f'`design` must be an ActuatorDesign, got {type(design).__name__}')
     check_pressure_model(pressure_model)
-    if isinstance(samples, bool) or not isinstance(samples, (int, np.integer)) or samples < 3:
-        raise ValueError(f'`samples` must be an integer >= 3, got {samples!r}')
+    integer('samples', samples, 3)
 
 
 def set_common(solver, design, pressure_model, tol, samples, max_iterations):
