@@ -1,10 +1,10 @@
 """Charts and files of design studies: sweep charts, and tables written whole or not at all."""
 
-import os
 import pathlib
-import tempfile
 
 import numpy as np
+
+from fpc_gripper.io.mcap_writer import atomic_output
 
 __all__ = ['write_table', 'save_figure', 'sweep_charts', 'pyplot']
 
@@ -18,17 +18,10 @@ def pyplot():
 
 
 def _atomic(path, write):
-    """Write `path` through a temporary file in its directory, renamed when complete."""
-    path = pathlib.Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f'.{path.name}.', dir=path.parent)
-    os.close(fd)
-    try:
+    """Write `path` through `write(temporary path)`, renamed into place when complete."""
+    with atomic_output(path) as tmp:
         write(tmp)
-        os.replace(tmp, path)
-    except BaseException:
-        pathlib.Path(tmp).unlink(missing_ok=True)
-        raise
-    return path
+    return pathlib.Path(path)
 
 
 def write_table(frame, path, fmt='csv'):
