@@ -24,6 +24,9 @@ def int_range(low, high):
     return [IntegerRange(from_value=int(low), to_value=int(high), step=1)]
 
 
+_RANGES = {'floating_point_range': float_range, 'integer_range': int_range}
+
+
 def declare_table(node, table, defaults=None):
     """
     Declare every ``(name, default, description, descriptor fields)`` row of a table.
@@ -33,13 +36,16 @@ def declare_table(node, table, defaults=None):
     node : rclpy.node.Node
     table : iterable of tuple
         Rows of name, default value, description and a dict of further
-        ParameterDescriptor fields (ranges, read_only, additional_constraints).
+        ParameterDescriptor fields (ranges, read_only, additional_constraints). A range
+        may be given as a ``(low, high)`` pair, so that a table can be free of ROS.
     defaults : dict, optional
         Default values that replace the table's, by name.
 
     """
     defaults = defaults or {}
     for name, default, description, extra in table:
+        extra = {key: _RANGES[key](*value) if isinstance(value, tuple) else value
+                 for key, value in extra.items()}
         node.declare_parameter(name, defaults.get(name, default),
                                ParameterDescriptor(description=description, **extra))
 

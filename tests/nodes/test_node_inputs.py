@@ -280,11 +280,11 @@ def test_bridge_refuses_a_default_command(context):
     try:
         bridge._on_command(0, pressure())
         assert bridge.supervisors[0].mode is SupervisorMode.IDLE
-        report = bridge._core.step(bridge._latch()).reports[0]
+        report = bridge.core.step(bridge._latch()).reports[0]
         assert report.level == 1 and 'command rejected (below vacuum)' in report.message
         bridge._on_command(0, pressure(ATM + 50e3))
         assert bridge.supervisors[0].mode is SupervisorMode.TRACKING
-        report = bridge._core.step(bridge._latch()).reports[0]
+        report = bridge.core.step(bridge._latch()).reports[0]
         assert report.level == 0 and report.values['rejected_commands'] == '1'
     finally:
         bridge.destroy_node()
