@@ -14,11 +14,12 @@ import yaml
 from .mcap_index_spill import spill_chunk_indexes
 
 __all__ = [
-    'BAG_METADATA_VERSION', 'DEFINITION_SEPARATOR', 'MESSAGE_ENCODING', 'PROFILE',
-    'SCHEMA_ENCODING', 'McapWriterError', 'Rosbag2McapWriter', 'SchemaNotFoundError',
+    'BAG_METADATA_VERSION', 'COMPRESSIONS', 'DEFINITION_SEPARATOR', 'MESSAGE_ENCODING',
+    'PROFILE', 'SCHEMA_ENCODING', 'McapWriterError', 'Rosbag2McapWriter', 'SchemaNotFoundError',
     'atomic_mcap_writer', 'atomic_output', 'message_definition', 'normalize_type_name',
     'qos_profile_to_dict',
-    'serialize_qos_profiles', 'share_directory', 'type_description_hash', 'type_name_of',
+    'serialize_qos_profiles', 'share_directory', 'type_description_hash', 'type_hash_string',
+    'type_name_of',
 ]
 
 #: MCAP profile, message encoding and schema encoding that rosbag2's MCAP storage writes.
@@ -35,6 +36,8 @@ _COMPRESSION = {
     'lz4': CompressionType.LZ4,
     'none': CompressionType.NONE,
 }
+#: Chunk compressions a writer takes, the default first.
+COMPRESSIONS = tuple(_COMPRESSION)
 _PRIMITIVE_TYPES = frozenset((
     'bool', 'byte', 'char', 'float32', 'float64', 'int8', 'uint8', 'int16', 'uint16',
     'int32', 'uint32', 'int64', 'uint64', 'string', 'wstring'))
@@ -308,6 +311,27 @@ def type_description_hash(type_name):
         if entry.get('type_name') == full:
             return entry.get('hash_string', '')
     return ''
+
+
+def type_hash_string(type_hash, type_name):
+    """
+    Return the REP-2011 hash string of a type as a publisher announces it, or as installed.
+
+    Parameters
+    ----------
+    type_hash : object
+        The ``topic_type_hash`` of an rclpy TopicEndpointInfo (``version`` and ``value``
+        bytes); one of version 0 or all zeros is not a hash.
+    type_name : str
+        ``pkg/msg/Type``: its installed description gives the hash otherwise
+        (`type_description_hash`).
+
+    """
+    value = bytes(getattr(type_hash, 'value', b'') or b'')
+    version = int(getattr(type_hash, 'version', 0) or 0)
+    if version > 0 and any(value):
+        return f'RIHS{version:02d}_{value.hex()}'
+    return type_description_hash(type_name)
 
 
 def _policy_name(value):

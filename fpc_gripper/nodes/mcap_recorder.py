@@ -2,29 +2,27 @@
 
 import functools
 import importlib
-import struct
 import sys
-import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
+from rcl_interfaces.msg import SetParametersResult
 import rclpy
 from rclpy.exceptions import InvalidHandle
 from rclpy.impl.implementation_singleton import rclpy_implementation
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-from .parameters import float_range
+from .parameters import declare_table
 from .runner import run_node
-from ..io.background_writer import BackgroundWriter
-from ..io.mcap_writer import (McapWriterError, normalize_type_name, Rosbag2McapWriter,
-                              SchemaNotFoundError, type_description_hash)
-from ..io.messages import gripper_topics
+from ..io.mcap_writer import (McapWriterError, normalize_type_name, SchemaNotFoundError,
+                              type_hash_string)
+from ..io.messages import cdr_header_stamp, INVALID_STAMP
+from ..io.recorder_settings import (apply_settings, compression_refusal, default_topics,
+                                    open_recording, PARAMETERS)
+from ..io.recording_counts import Health, RecordingCounts
 
 __all__ = ['McapRecorder', 'main']
 
-_COMPRESSIONS = ('zstd', 'lz4', 'none')
-_DEFAULT_FINGERS = ('finger_0', 'finger_1', 'finger_2')
 # Subscriptions keep every message until it is taken: while the executor lags (a CPU hog,
 # a burst), the reader's queue is what keeps the messages, and a keep-last queue drops its
 # oldest silently (1000 deep, a 3 s stall at 500 Hz lost 500 of a reliable topic). Fast DDS
@@ -40,20 +38,16 @@ _STOP_TAKE_LIMIT = 100_000
 _RCLError = rclpy_implementation.RCLError
 _DIAGNOSTICS_QOS = QoSProfile(depth=10, history=HistoryPolicy.KEEP_LAST,
                               reliability=ReliabilityPolicy.RELIABLE)
+_LEVELS = {Health.WRITES_FAILED: DiagnosticStatus.ERROR,
+           Health.QUEUE_FULL: DiagnosticStatus.WARN,
+           Health.INVALID_STAMPS: DiagnosticStatus.WARN,
+           Health.RECORDING: DiagnosticStatus.OK}
 
 
 def _message_class(type_name):
     package, namespace, name = normalize_type_name(type_name)
     module = importlib.import_module(f'{package}.{namespace}')
     return getattr(module, name)
-
-
-def _hash_string(type_hash, type_name):
-    value = bytes(getattr(type_hash, 'value', b'') or b'')
-    version = int(getattr(type_hash, 'version', 0) or 0)
-    if version > 0 and any(value):
-        return f'RIHS{version:02d}_{value.hex()}'
-    return type_description_hash(type_name)
 
 
 def adapt_qos_to_publishers(profiles):
@@ -111,29 +105,17 @@ class McapRecorder(Node):
         self._writer = None
         self._background = None
         self._subs = {}
-        # Per topic: [messages received, of them dropped because the queue was full].
-        self._counts = {}
+        self._counts = RecordingCounts()
         self._stamped = {}
         self._params = {}
-        self.invalid_stamps = 0
-        self._refused = 0
         self._diagnostics_pub = None
-        self._last_error = None
-        self._reported = (0, 0, 0)
         self.add_on_set_parameters_callback(self._validate_parameters)
         self.add_post_set_parameters_callback(self._store_parameters)
-        self._declare_parameters()
+        declare_table(self, PARAMETERS)
         self._wanted = self._topic_list()
         p = self._params
-        output = p['output_path'] or time.strftime('fpc_gripper_%Y_%m_%d-%H_%M_%S.mcap')
-        self._writer = Rosbag2McapWriter(
-            output, compression=p['compression'],
-            max_file_size=int(p['max_file_size_mb'] * 1024 * 1024),
-            max_duration=int(p['max_duration_s'] * 1e9), overwrite=p['overwrite'],
-            library='fpc_gripper mcap_recorder (mcap-python)')
-        self._background = BackgroundWriter(
-            self._writer, flush_period_s=p['flush_period_s'],
-            max_queue_bytes=int(p['max_queue_mb'] * 1024 * 1024), on_error=self._write_failed)
+        self._background = open_recording(p, on_error=self._counts.write_failed)
+        self._writer = self._background.writer
         if p['diagnostics_period_s'] > 0.0:
             self._diagnostics_pub = self.create_publisher(DiagnosticArray, '/diagnostics',
                                                           _DIAGNOSTICS_QOS)
@@ -147,52 +129,11 @@ class McapRecorder(Node):
 
     # -- parameters -----------------------------------------------------------------------
 
-    def _declare_parameters(self):
-        positive = float_range(0.001, 3600.0)
-        non_negative = float_range(0.0, 1.0e9)
-        self.declare_parameter('output_path', '', ParameterDescriptor(
-            description='MCAP file (*.mcap), or a directory for split files '
-                        '(default: fpc_gripper_<date>.mcap in the working directory)',
-            read_only=True))
-        self.declare_parameter('topics', [''], ParameterDescriptor(
-            description='Topics to record, relative to the node namespace; empty for every '
-                        'fpc_gripper input and output of the configured fingers',
-            read_only=True))
-        self.declare_parameter('flush_period_s', 1.0, ParameterDescriptor(
-            description='Longest time a received message waits before it is on disk '
-                        'in a completed chunk [s]', floating_point_range=positive))
-        self.declare_parameter('max_file_size_mb', 0.0, ParameterDescriptor(
-            description='Split to a new file at this size [MiB]; 0 never splits',
-            floating_point_range=non_negative))
-        self.declare_parameter('max_duration_s', 0.0, ParameterDescriptor(
-            description='Split to a new file after this much recording time [s]; 0 never',
-            floating_point_range=non_negative))
-        self.declare_parameter('compression', 'zstd', ParameterDescriptor(
-            description='Chunk compression: zstd, lz4 or none', read_only=True))
-        self.declare_parameter('discovery_period_s', 0.5, ParameterDescriptor(
-            description='Period of the search for publishers of topics not yet recorded [s]',
-            floating_point_range=positive, read_only=True))
-        self.declare_parameter('gripper_config', '', ParameterDescriptor(
-            description='Gripper configuration YAML whose fingers give the default topics '
-                        '(default: the package default)', read_only=True))
-        self.declare_parameter('overwrite', False, ParameterDescriptor(
-            description='Replace an existing output file', read_only=True))
-        self.declare_parameter('diagnostics_period_s', 1.0, ParameterDescriptor(
-            description='Period of the status on /diagnostics (recorded too if /diagnostics '
-                        'is among the topics) [s]; 0 publishes none',
-            floating_point_range=float_range(0.0, 3600.0), read_only=True))
-        self.declare_parameter('max_queue_mb', 100.0, ParameterDescriptor(
-            description='Bound of the messages received but not yet written [MiB]; a '
-                        'message that finds it full is dropped and counted',
-            floating_point_range=float_range(1.0, 1.0e6), read_only=True))
-
     def _validate_parameters(self, parameters):
         for param in parameters:
-            if param.name == 'compression' and param.value not in _COMPRESSIONS:
-                return SetParametersResult(
-                    successful=False,
-                    reason=f'`compression` must be one of {", ".join(_COMPRESSIONS)}, '
-                           f'got {param.value!r}')
+            reason = compression_refusal(param.value) if param.name == 'compression' else None
+            if reason is not None:
+                return SetParametersResult(successful=False, reason=reason)
         return SetParametersResult(successful=True)
 
     def _store_parameters(self, parameters):
@@ -202,31 +143,20 @@ class McapRecorder(Node):
                 value = [t for t in value if t]
             self._params[param.name] = value
         if self._writer is not None:
-            self._writer.max_file_size = int(self._params['max_file_size_mb'] * 1024 * 1024)
-            self._writer.max_duration = int(self._params['max_duration_s'] * 1e9)
-            self._background.flush_period_s = self._params['flush_period_s']
+            apply_settings(self._background, self._params)
 
     def _topic_list(self):
         topics = self._params['topics']
         if not topics:
-            topics = gripper_topics(self._finger_names())
+            topics, problem = default_topics(self._params['gripper_config'])
+            if problem is not None:
+                self.get_logger().warning(problem)
         resolved = []
         for topic in topics:
             name = self.resolve_topic_name(topic)
             if name not in resolved:
                 resolved.append(name)
         return resolved
-
-    def _finger_names(self):
-        try:
-            from ..io.config import default_gripper_config_path, load_gripper_config
-            path = self._params['gripper_config'] or default_gripper_config_path()
-            return [f.name for f in load_gripper_config(path).fingers]
-        except (ImportError, OSError, ValueError) as error:
-            self.get_logger().warning(
-                f'gripper configuration unavailable ({error}); recording fingers '
-                f'{", ".join(_DEFAULT_FINGERS)}')
-            return list(_DEFAULT_FINGERS)
 
     # -- recording ------------------------------------------------------------------------
 
@@ -249,8 +179,8 @@ class McapRecorder(Node):
             try:
                 msg_class = _message_class(type_name)
                 self._writer.add_topic(topic, type_name, offered_qos_profiles=profiles,
-                                       type_hash=_hash_string(infos[0].topic_type_hash,
-                                                              type_name))
+                                       type_hash=type_hash_string(infos[0].topic_type_hash,
+                                                                  type_name))
             except (ImportError, AttributeError, ValueError, SchemaNotFoundError) as error:
                 self.get_logger().error(f'cannot record {topic} ({type_name}): {error}',
                                         throttle_duration_sec=10.0)
@@ -261,7 +191,7 @@ class McapRecorder(Node):
         # Raw subscriptions hand over the CDR bytes: nothing is deserialised and
         # serialised again, which for a 129-pose Path costs milliseconds per message.
         self._stamped[topic] = _starts_with_header(msg_class)
-        self._counts.setdefault(topic, [0, 0])
+        self._counts.add_topic(topic)
         self._subs[topic] = (self.create_subscription(
             msg_class, topic, functools.partial(self._on_message, topic), qos, raw=True),
             msg_class, qos)
@@ -286,65 +216,41 @@ class McapRecorder(Node):
         if self._writer is None:
             return
         log_time = self.get_clock().now().nanoseconds
-        counts = self._counts[topic]
-        counts[0] += 1
         publish_time = log_time
         if self._stamped.get(topic):
-            stamp = _cdr_header_stamp(data)
-            if stamp is _INVALID:
-                self.invalid_stamps += 1
+            stamp = cdr_header_stamp(data)
+            if stamp is INVALID_STAMP:
+                self._counts.invalid_stamps += 1
                 self.get_logger().warning(
                     f'{topic}: header stamp is not a valid time; recorded as received, '
                     f'with the receive time as publish time ({self.invalid_stamps} so far)',
                     throttle_duration_sec=5.0)
             elif stamp:
                 publish_time = stamp
+        dropped = False
         try:
-            if not self._background.put(topic, bytes(data), log_time, publish_time):
-                counts[1] += 1
+            dropped = not self._background.put(topic, bytes(data), log_time, publish_time)
         except McapWriterError as error:
-            self._refused += 1
-            self._write_failed(error)
-
-    def _write_failed(self, error):
-        """Keep the last error for the diagnostics (called from the writer thread too)."""
-        self._last_error = f'{type(error).__name__}: {error}'
+            self._counts.refuse(error)
+        self._counts.count(topic, dropped)
 
     def _report_health(self):
-        background = self._background
         if self._writer is None:
             return
-        counts = (background.dropped, self.invalid_stamps, background.errors + self._refused)
-        dropped, invalid, errors = (now - before for now, before in zip(counts,
-                                                                        self._reported))
-        self._reported = counts
-        if errors:
-            level, message = DiagnosticStatus.ERROR, f'{errors} writes failed: {self._last_error}'
-            self.get_logger().error(f'{message} ({counts[2]} lost so far)')
-        elif dropped:
-            level, message = DiagnosticStatus.WARN, f'{dropped} messages dropped: queue full'
-            self.get_logger().warning(f'{message} ({counts[0]} so far; raise max_queue_mb)')
-        elif invalid:
-            level = DiagnosticStatus.WARN
-            message = f'{invalid} header stamps not a valid time (publish time = log time)'
-        else:
-            level, message = DiagnosticStatus.OK, 'recording'
+        report = self._counts.report(self._background)
+        if report.health is Health.WRITES_FAILED:
+            self.get_logger().error(report.log)
+        elif report.health is Health.QUEUE_FULL:
+            self.get_logger().warning(report.log)
         if self._diagnostics_pub is None:
             return
-        values = {'file': str(self._writer.path),
-                  'messages received': sum(c[0] for c in self._counts.values()),
-                  'messages written': background.written,
-                  'queued': background.queued, 'queued bytes': background.queued_bytes,
-                  'dropped (queue full)': counts[0], 'invalid stamps': counts[1],
-                  'failed writes': counts[2], 'topics': len(self._subs)}
-        for topic, (received, dropped) in self._counts.items():
-            values[topic] = f'received {received}, dropped {dropped} (queue full)'
+        values = self._counts.values(self._writer.path, self._background)
         array = DiagnosticArray()
         array.header.stamp = self.get_clock().now().to_msg()
         array.status = [DiagnosticStatus(
-            level=level, name=f'{self.get_fully_qualified_name()}: recording',
-            message=message, hardware_id=str(self._writer.path),
-            values=[KeyValue(key=k, value=str(v)) for k, v in values.items()])]
+            level=_LEVELS[report.health], name=f'{self.get_fully_qualified_name()}: recording',
+            message=report.message, hardware_id=str(self._writer.path),
+            values=[KeyValue(key=k, value=v) for k, v in values.items()])]
         self._diagnostics_pub.publish(array)
 
     @property
@@ -360,7 +266,12 @@ class McapRecorder(Node):
     @property
     def received(self):
         """Messages received so far, over every topic."""
-        return sum(c[0] for c in self._counts.values())
+        return self._counts.received
+
+    @property
+    def invalid_stamps(self):
+        """Messages whose header stamp was not a valid time, so far."""
+        return self._counts.invalid_stamps
 
     @property
     def recorded_topics(self):
@@ -382,19 +293,10 @@ class McapRecorder(Node):
         writer, self._writer = self._writer, None
         background, self._background = self._background, None
         background.close()
-        received = self.received
-        full = background.dropped
-        written = writer.message_count
-        # Whatever was received and neither written nor refused by the full queue failed
-        # (a write error, or a put after the writer thread died).
-        failed = received - written - full
         # After SIGINT/SIGTERM the context is shut down and /rosout cannot publish.
         logger = self.get_logger() if self.context.ok() else \
             rclpy.logging.get_logger('fpc_gripper.mcap_recorder')
-        logger.info(
-            f'closed {", ".join(str(p) for p in writer.paths)}: received {received}, '
-            f'written {written}, dropped {full + failed} ({full} queue full, {failed} '
-            f'failed writes); {self.invalid_stamps} invalid header stamps')
+        logger.info(self._counts.summary(writer.paths, writer.message_count, background.dropped))
 
     def destroy_node(self):
         """Close the recording, then destroy the node."""
@@ -406,27 +308,6 @@ def _starts_with_header(msg_class):
     """Whether a message type's first field is a std_msgs/Header."""
     fields = list(msg_class.get_fields_and_field_types().items())
     return bool(fields) and fields[0] == ('header', 'std_msgs/Header')
-
-
-#: What `_cdr_header_stamp` returns for a stamp that is not a valid time.
-_INVALID = object()
-
-
-def _cdr_header_stamp(data):
-    """
-    Header stamp [ns] of a serialised message that starts with a std_msgs/Header.
-
-    CDR: a 4-byte encapsulation header (byte 1 is 1 for little endian), then the
-    stamp's int32 sec and uint32 nanosec. Returns 0 if the data is too short, and
-    `_INVALID` for negative seconds or nanoseconds of a second or more: no valid
-    builtin_interfaces/Time (an MCAP time is an unsigned 64-bit count).
-    """
-    if len(data) < 12:
-        return 0
-    sec, nanosec = struct.unpack_from('<iI' if data[1] == 1 else '>iI', data, 4)
-    if sec < 0 or nanosec >= 1_000_000_000:
-        return _INVALID
-    return sec * 1_000_000_000 + nanosec
 
 
 def _take(subscription):

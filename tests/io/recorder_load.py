@@ -33,8 +33,8 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
+from fpc_gripper.io.messages import cdr_header_stamp
 from fpc_gripper.io.messages import serialized_shape
-from fpc_gripper.nodes.mcap_recorder import _cdr_header_stamp
 
 _HOG = 'while True:\n    pass\n'
 #: Stamp of shape i of finger f: a clear base, then f and i in the nanoseconds.
@@ -134,7 +134,7 @@ def record_under_load(out_dir, *, fingers=3, rate_hz=200.0, seconds=3.0, hog=0,
 
     def on_shape(topic, data):
         with lock:
-            received.add((topic, _cdr_header_stamp(data)))
+            received.add((topic, cdr_header_stamp(data)))
 
     pubs = [node.create_publisher(Path, t, qos) for t in topics]
     for t in topics:

@@ -1,5 +1,7 @@
 """Rosbag2-form MCAP writing: schema text, records and metadata, flush and split behaviour."""
 
+import types
+
 from helpers import read_with_rosbags
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
@@ -14,6 +16,7 @@ from fpc_gripper.io.mcap_reader import McapFile, recover, TruncatedFileError
 from fpc_gripper.io.mcap_writer import (atomic_mcap_writer, DEFINITION_SEPARATOR,
                                         message_definition, Rosbag2McapWriter,
                                         SchemaNotFoundError, serialize_qos_profiles,
+                                        type_description_hash, type_hash_string,
                                         type_name_of)
 
 SEP = '=' * 80
@@ -223,3 +226,19 @@ def test_times_outside_an_mcap_time_are_refused_by_name(tmp_path, field, value):
             writer.write('/aperture', data, times['log_time'], times['publish_time'])
         writer.write('/aperture', data, 2**64 - 1, 0)    # the extremes are times
     assert [(log, pub) for _, _, log, pub, _ in read_independently(path)] == [(2**64 - 1, 0)]
+
+
+def test_the_type_hash_a_publisher_announces_is_spelled_as_rep_2011():
+    announced = types.SimpleNamespace(version=1, value=bytes(range(32)))
+    assert type_hash_string(announced, 'std_msgs/msg/Float64') == \
+        'RIHS01_' + bytes(range(32)).hex()
+
+
+@pytest.mark.parametrize('announced', [types.SimpleNamespace(version=0, value=b'\x01' * 32),
+                                       types.SimpleNamespace(version=1, value=bytes(32)),
+                                       None])
+def test_no_announced_type_hash_falls_back_to_the_installed_description(announced):
+    installed = type_description_hash('std_msgs/msg/Float64')
+    assert installed.startswith('RIHS01_')
+    assert type_hash_string(announced, 'std_msgs/msg/Float64') == installed
+    assert type_hash_string(announced, 'no_such_pkg/msg/Thing') == ''
