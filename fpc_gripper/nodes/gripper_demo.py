@@ -1,7 +1,6 @@
 """Scripted gripper session in one process: open, grasp a virtual object, hold, release."""
 
 import argparse
-from dataclasses import dataclass, field
 import math
 import pathlib
 import signal
@@ -32,6 +31,10 @@ from fpc_gripper.nodes.runner import make_executor
 from fpc_gripper.nodes.runner import own_arguments
 from fpc_gripper.nodes.runner import SPIN_TIMEOUT_S
 from fpc_gripper.nodes.runner import StopRequest
+from fpc_gripper.services.session import default_phases
+from fpc_gripper.services.session import format_summary
+from fpc_gripper.services.session import Phase
+from fpc_gripper.services.session import Session
 
 __all__ = ['Phase', 'SessionScript', 'main', 'run_session']
 
@@ -39,172 +42,61 @@ _RELIABLE = QoSProfile(depth=10, history=HistoryPolicy.KEEP_LAST,
                        reliability=ReliabilityPolicy.RELIABLE)
 
 
-@dataclass
-class Phase:
-    """
-    One step of the scripted session.
-
-    Attributes
-    ----------
-    name : str
-    kind : {'aperture', 'grasp', 'hold'}
-    value : float
-        Aperture [m], grasp force [N], or the duration of a hold [s].
-    timeout : float
-        Longest time allowed to reach the goal [s].
-    reached : bool
-    time_to_goal : float
-        [s] (nan if never reached).
-    start, end : float
-        Node-clock times [s].
-    final : dict
-        Last controller_state values of the phase.
-    arcs : list
-        Contact arc (start, end) [m] of every finger at the end of the phase, or None.
-    holding : float
-        Holding force of the grasp at the end of the phase [N] (hold phase only).
-
-    """
-
-    name: str
-    kind: str
-    value: float
-    timeout: float = 10.0
-    reached: bool = False
-    time_to_goal: float = math.nan
-    start: float = math.nan
-    end: float = math.nan
-    detail: str = ''
-    final: dict = field(default_factory=dict)
-    arcs: list = field(default_factory=list)
-    holding: float = math.nan
-
-
 class SessionScript(Node):
     """
     Drive the controller through a list of phases, from timers, and judge each one.
 
-    An aperture or grasp phase publishes its goal and waits for ``controller_state`` to
-    report that goal (same target) as reached, then dwells `dwell_s`. A hold phase checks
-    for its duration that the goal stays reached and that every finger's normal force
-    stays within `force_band` of its share of the grasp force. `done` completes after the
-    last phase or the first failure; `arcs` (optional) gives every finger's contact arc,
-    stored with each phase as it ends.
+    The judging is :class:`fpc_gripper.services.session.Session`'s; this node publishes
+    each phase's goal on ``aperture_command`` or ``grasp_force_command`` and gives it what
+    ``controller_state`` says. `done` completes (every phase reached its goal, or not)
+    after the last phase or the first failure.
     """
 
     def __init__(self, phases, grasp_force, dwell_s=0.5, force_band=0.10, arcs=None,
                  **kwargs):
         super().__init__('session_script', **kwargs)
-        self.phases = list(phases)
-        self.grasp_force = float(grasp_force)
-        self.dwell_s = float(dwell_s)
-        self.force_band = float(force_band)
-        self._arcs = arcs
         self.done = Future()
-        self.state = {}
-        self._index = -1
-        self._goal_seen_active = False
-        self._reached_at = None
         self._aperture_pub = self.create_publisher(Float64, 'aperture_command', _RELIABLE)
         self._force_pub = self.create_publisher(Float64, 'grasp_force_command', _RELIABLE)
         self.create_subscription(DiagnosticStatus, 'controller_state', self._on_state,
                                  _RELIABLE)
-        self.started = self._now()
+        self._session = Session(phases, grasp_force, self._now(), dwell_s, force_band, arcs)
         self._timer = self.create_timer(0.02, self._on_timer)
+
+    @property
+    def phases(self):
+        """The phases, as judged so far."""
+        return self._session.phases
+
+    @property
+    def state(self):
+        """The newest controller_state values (with ``level`` and ``message``)."""
+        return self._session.state
 
     def _now(self):
         return self.get_clock().now().nanoseconds * 1e-9
 
     def _on_state(self, msg):
-        self.state = {kv.key: kv.value for kv in msg.values}
-        self.state['level'] = int.from_bytes(msg.level, 'little') if isinstance(
+        state = {kv.key: kv.value for kv in msg.values}
+        state['level'] = int.from_bytes(msg.level, 'little') if isinstance(
             msg.level, bytes) else int(msg.level)
-        self.state['message'] = msg.message
-
-    def _ready(self):
-        return (self._aperture_pub.get_subscription_count() > 0
-                and self._force_pub.get_subscription_count() > 0 and self.state)
-
-    def _start(self, index, now):
-        self._index = index
-        phase = self.phases[index]
-        phase.start = now
-        self._goal_seen_active = False
-        self._reached_at = None
-        if phase.kind == 'aperture':
-            self._aperture_pub.publish(Float64(data=phase.value))
-        elif phase.kind == 'grasp':
-            self._force_pub.publish(Float64(data=phase.value))
-        self.get_logger().info(f'phase {phase.name}: {phase.kind} {phase.value:g}')
-
-    def _finish(self, now, reached, detail=''):
-        phase = self.phases[self._index]
-        phase.end = now
-        phase.reached = reached
-        phase.detail = detail or phase.detail
-        phase.final = dict(self.state)
-        if self._arcs is not None:
-            phase.arcs = list(self._arcs())
-        if not reached or self._index + 1 >= len(self.phases):
-            for rest in self.phases[self._index + 1:]:
-                rest.detail = 'not run'
-            self._timer.cancel()
-            if not self.done.done():
-                self.done.set_result(all(p.reached for p in self.phases))
-            return
-        self._start(self._index + 1, now)
-
-    def _matches(self, phase):
-        try:
-            if phase.kind == 'aperture':
-                return abs(float(self.state['aperture_target_m']) - phase.value) < 1e-6 \
-                    or 'clamped' in self.state.get('message', '')
-            return abs(float(self.state['force_target_n']) - phase.value) < 1e-3
-        except (KeyError, ValueError):
-            return False
+        state['message'] = msg.message
+        self._session.state = state
 
     def _on_timer(self):
-        now = self._now()
-        if self._index < 0:
-            if self._ready() and now - self.started > 1.0:
-                self._start(0, now)
-            elif now - self.started > 20.0:
-                self.phases[0].detail = 'the controller did not come up'
-                self._index = 0
-                self._finish(now, False)
-            return
-        phase = self.phases[self._index]
-        elapsed = now - phase.start
-        status = self.state.get('goal_status', '')
-        if phase.kind == 'hold':
-            forces = [float(v) for k, v in self.state.items() if k.endswith('contact_force_n')]
-            share = self.grasp_force / max(len(forces), 1)
-            worst = max((abs(f - share) for f in forces), default=math.inf)
-            phase.final = dict(self.state)
-            if status != 'reached' or worst > self.force_band * share:
-                self._finish(now, False, f'left the goal: status {status}, worst force error '
-                                         f'{worst:.3f} N')
-            elif elapsed >= phase.value:
-                phase.time_to_goal = 0.0
-                self._finish(now, True)
-            return
-        if self._matches(phase) and status == 'active':
-            self._goal_seen_active = True
-        if self._reached_at is None and self._goal_seen_active and status == 'reached':
-            self._reached_at = now
-            phase.time_to_goal = now - phase.start
-        if self._reached_at is not None and now - self._reached_at >= self.dwell_s:
-            self._finish(now, True)
-        elif elapsed > phase.timeout:
-            self._finish(now, False, f'not reached in {phase.timeout:.1f} s (status {status})')
-
-
-def default_phases(open_aperture=0.120, grasp_force=1.5, hold_s=3.0):
-    """Open, close on the object and grasp, hold, release (open)."""
-    return [Phase('open', 'aperture', open_aperture, timeout=8.0),
-            Phase('grasp', 'grasp', grasp_force, timeout=10.0),
-            Phase('hold', 'hold', hold_s, timeout=hold_s + 1.0),
-            Phase('release', 'aperture', open_aperture, timeout=8.0)]
+        ready = (self._aperture_pub.get_subscription_count() > 0
+                 and self._force_pub.get_subscription_count() > 0)
+        phase = self._session.step(self._now(), ready)
+        if phase is not None:
+            if phase.kind == 'aperture':
+                self._aperture_pub.publish(Float64(data=phase.value))
+            elif phase.kind == 'grasp':
+                self._force_pub.publish(Float64(data=phase.value))
+            self.get_logger().info(f'phase {phase.name}: {phase.kind} {phase.value:g}')
+        if self._session.finished:
+            self._timer.cancel()
+            if not self.done.done():
+                self.done.set_result(self._session.passed)
 
 
 def run_session(output_dir, object_diameter=0.040, grasp_force=1.5, open_aperture=0.120,
@@ -298,37 +190,6 @@ def run_session(output_dir, object_diameter=0.040, grasp_force=1.5, open_apertur
             executor.shutdown()
         for node in reversed(nodes):
             node.destroy_node()
-
-
-def _arc_text(arc):
-    """'s0-s1' in mm of a contact arc, a single value for a point, '-' for none."""
-    if arc is None:
-        return '-'
-    start, end = arc[0] * 1e3, arc[1] * 1e3
-    return f'{start:.1f}' if end - start < 0.05 else f'{start:.1f}-{end:.1f}'
-
-
-def format_summary(phases, info):
-    """Return the summary table printed at the end of the session."""
-    lines = [f'{"phase":<9} {"goal":>12} {"result":>8} {"t_goal[s]":>9} {"aperture[mm]":>12} '
-             f'{"normal force[N]":>22} {"contact arc s[mm]":>32} {"holding[N]":>10}  detail']
-    for p in phases:
-        goal = {'aperture': f'{p.value * 1e3:.1f} mm', 'grasp': f'{p.value:.3f} N',
-                'hold': f'{p.value:.1f} s'}[p.kind]
-        aperture = p.final.get('aperture_m')
-        aperture = f'{float(aperture) * 1e3:.2f}' if aperture else '-'
-        forces = [v for k, v in sorted(p.final.items()) if k.endswith('contact_force_n')]
-        forces = ' '.join(f'{float(f):.3f}' for f in forces) or '-'
-        arcs = ' '.join(_arc_text(a) for a in p.arcs) or '-'
-        holding = f'{p.holding:.3f}' if math.isfinite(p.holding) else '-'
-        result = 'REACHED' if p.reached else 'FAILED'
-        lines.append(f'{p.name:<9} {goal:>12} {result:>8} {p.time_to_goal:>9.2f} '
-                     f'{aperture:>12} {forces:>22} {arcs:>32} {holding:>10}  {p.detail}')
-    lines.append(f'recording: {info["mcap"]} ({info["messages"]} messages); largest command '
-                 f'{info["max_command"] * 1e-3:.1f} kPa (limit {info["max_pressure"] * 1e-3:.0f});'
-                 f' model-node tip (tip-force model) to the contact model tip during hold '
-                 f'{info["contact_residual"] * 1e3:.3f} mm; wall time {info["wall_s"]:.1f} s')
-    return '\n'.join(lines)
 
 
 def main(args=None):
