@@ -222,11 +222,12 @@ class RegulatorBridge(SelfActivatingNode):
 
     def _configure(self):
         values = self._values(_CONFIGURE_READS)
+        bounds = input_bounds(self)
         for level, text in self._session.load(values):
             self._log.log(_SEVERITIES[level], text)
         # The simulated backend's model advances to the time latched at each control step,
         # so every published stamp is exactly the model time of its sample.
-        self._session.connect(values, input_bounds(self), self._backend_time)
+        self._session.connect(values, bounds, self._backend_time)
         self._pressure_pubs = tuple(
             self.create_lifecycle_publisher(FluidPressure, f'{name}/pressure',
                                             qos_profile_sensor_data)
