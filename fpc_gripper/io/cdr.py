@@ -1,10 +1,10 @@
-"""Decode the nodes' per-command input messages straight from CDR bytes, or decline."""
+"""Read the nodes' per-command inputs and any header stamp straight from CDR bytes."""
 
 import struct
 from typing import NamedTuple
 
-__all__ = ['FluidPressureFields', 'Header', 'Time', 'Vector3', 'Wrench',
-           'WrenchStampedFields', 'fluid_pressure', 'wrench_stamped']
+__all__ = ['INVALID_STAMP', 'FluidPressureFields', 'Header', 'Time', 'Vector3', 'Wrench',
+           'WrenchStampedFields', 'fluid_pressure', 'header_stamp', 'wrench_stamped']
 
 #: Encapsulation of little-endian plain CDR (XCDR1), which every ROS 2 middleware writes.
 _CDR_LE = b'\x00\x01'
@@ -12,6 +12,8 @@ _ENCAPSULATION = 4
 _STAMP = struct.Struct('<iII')
 _TWO = struct.Struct('<2d')
 _SIX = struct.Struct('<6d')
+#: What `header_stamp` returns for a stamp that is not a valid time.
+INVALID_STAMP = object()
 
 
 class Time(NamedTuple):
@@ -128,3 +130,20 @@ def wrench_stamped(payload):
         return None
     values = fields[1]
     return WrenchStampedFields(fields[0], Wrench(Vector3(*values[:3]), Vector3(*values[3:])))
+
+
+def header_stamp(data):
+    """
+    Return the header stamp [ns] of a serialised message that starts with a std_msgs/Header.
+
+    CDR: a 4-byte encapsulation header (byte 1 is 1 for little endian), then the
+    stamp's int32 sec and uint32 nanosec. Returns 0 if the data is too short, and
+    `INVALID_STAMP` for negative seconds or nanoseconds of a second or more: no valid
+    builtin_interfaces/Time (an MCAP time is an unsigned 64-bit count).
+    """
+    if len(data) < 12:
+        return 0
+    sec, nanosec = struct.unpack_from('<iI' if data[1] == 1 else '>iI', data, 4)
+    if sec < 0 or nanosec >= 1_000_000_000:
+        return INVALID_STAMP
+    return sec * 1_000_000_000 + nanosec

@@ -14,11 +14,10 @@ from std_msgs.msg import ColorRGBA, Float64
 from visualization_msgs.msg import Marker
 
 __all__ = [
-    'DEFAULT_ATMOSPHERIC_PRESSURE', 'FINGER_TOPICS', 'GRIPPER_TOPICS', 'INVALID_STAMP',
-    'MODEL_OUTPUT_TYPES', 'STATE_QOS',
-    'cdr_header_stamp', 'curvature_message', 'finger_topic', 'gripper_topics',
-    'model_messages', 'ns_to_time', 'rigidity_message', 'shape_message', 'tangent_angles',
-    'time_to_ns',
+    'DEFAULT_ATMOSPHERIC_PRESSURE', 'FINGER_TOPICS', 'GRIPPER_TOPICS', 'MODEL_OUTPUT_TYPES',
+    'STATE_QOS',
+    'curvature_message', 'finger_topic', 'gripper_topics', 'model_messages', 'ns_to_time',
+    'rigidity_message', 'shape_message', 'tangent_angles', 'time_to_ns',
 ]
 
 #: The model's state (shape, curvature, rigidity, markers): a late joiner gets the newest
@@ -316,27 +315,6 @@ def _cdr_header(stamp_ns, frame_id):
     sec, nanosec = divmod(int(stamp_ns), 1_000_000_000)
     frame = frame_id.encode('utf-8') + b'\x00'
     return struct.pack('<iII', sec, nanosec, len(frame)) + frame
-
-
-#: What `cdr_header_stamp` returns for a stamp that is not a valid time.
-INVALID_STAMP = object()
-
-
-def cdr_header_stamp(data):
-    """
-    Return the header stamp [ns] of a serialised message that starts with a std_msgs/Header.
-
-    CDR: a 4-byte encapsulation header (byte 1 is 1 for little endian), then the
-    stamp's int32 sec and uint32 nanosec. Returns 0 if the data is too short, and
-    `INVALID_STAMP` for negative seconds or nanoseconds of a second or more: no valid
-    builtin_interfaces/Time (an MCAP time is an unsigned 64-bit count).
-    """
-    if len(data) < 12:
-        return 0
-    sec, nanosec = struct.unpack_from('<iI' if data[1] == 1 else '>iI', data, 4)
-    if sec < 0 or nanosec >= 1_000_000_000:
-        return INVALID_STAMP
-    return sec * 1_000_000_000 + nanosec
 
 
 def serialized_shape(result, frame_id, stamp_ns):

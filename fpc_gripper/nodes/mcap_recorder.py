@@ -14,9 +14,9 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 
 from .parameters import declare_table
 from .runner import run_node
+from ..io.cdr import header_stamp, INVALID_STAMP
 from ..io.mcap_writer import (McapWriterError, normalize_type_name, SchemaNotFoundError,
                               type_hash_string)
-from ..io.messages import cdr_header_stamp, INVALID_STAMP
 from ..io.recorder_settings import (apply_settings, compression_refusal, default_topics,
                                     open_recording, PARAMETERS)
 from ..io.recording_counts import Health, RecordingCounts
@@ -218,7 +218,7 @@ class McapRecorder(Node):
         log_time = self.get_clock().now().nanoseconds
         publish_time = log_time
         if self._stamped.get(topic):
-            stamp = cdr_header_stamp(data)
+            stamp = header_stamp(data)
             if stamp is INVALID_STAMP:
                 self._counts.invalid_stamps += 1
                 self.get_logger().warning(

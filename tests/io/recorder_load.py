@@ -33,7 +33,7 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-from fpc_gripper.io.messages import cdr_header_stamp
+from fpc_gripper.io.cdr import header_stamp
 from fpc_gripper.io.messages import serialized_shape
 
 _HOG = 'while True:\n    pass\n'
@@ -134,7 +134,7 @@ def record_under_load(out_dir, *, fingers=3, rate_hz=200.0, seconds=3.0, hog=0,
 
     def on_shape(topic, data):
         with lock:
-            received.add((topic, cdr_header_stamp(data)))
+            received.add((topic, header_stamp(data)))
 
     pubs = [node.create_publisher(Path, t, qos) for t in topics]
     for t in topics:

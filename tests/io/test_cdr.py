@@ -132,3 +132,25 @@ def test_the_guard_decodes_commands_by_struct():
     assert message.header.frame_id == 'finger_2'
     assert message.fluid_pressure == pytest.approx(1.2e5, rel=0, abs=0)
     assert not math.isnan(message.variance)
+
+
+# -- the header stamp of any stamped message (what mcap_recorder reads) ----------------------
+
+def test_the_header_stamp_of_a_serialised_message_is_read_without_decoding():
+    data = serialize_message(_pressure((1_700_000_000, 123_456_789), 'finger_0', 1.0e5, 0.0))
+    assert cdr.header_stamp(data) == 1_700_000_000_123_456_789
+
+
+def test_a_big_endian_header_stamp_is_read_too():
+    data = b'\x00\x00\x00\x00' + struct.pack('>iI', 12, 34) + b'\x00' * 8
+    assert cdr.header_stamp(data) == 12_000_000_034
+
+
+@pytest.mark.parametrize('sec, nanosec', [(-1, 0), (5, 1_000_000_000)])
+def test_a_header_stamp_that_is_no_time_is_told_apart(sec, nanosec):
+    data = b'\x00\x01\x00\x00' + struct.pack('<iI', sec, nanosec) + b'\x00' * 8
+    assert cdr.header_stamp(data) is cdr.INVALID_STAMP
+
+
+def test_data_too_short_for_a_stamp_has_none():
+    assert cdr.header_stamp(b'\x00\x01\x00\x00\x01\x00\x00') == 0

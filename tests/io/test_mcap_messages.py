@@ -10,14 +10,12 @@ import numpy as np
 from numpy.testing import assert_allclose
 import pytest
 from rclpy.serialization import deserialize_message, serialize_message
-from sensor_msgs.msg import FluidPressure
 from std_msgs.msg import Float64
 from visualization_msgs.msg import Marker, MarkerArray
 
 from fpc_gripper.io.mcap_writer import message_definition
-from fpc_gripper.io.messages import (cdr_header_stamp, curvature_message, FingerPlacement,
-                                     gripper_shape_markers, GRIPPER_SHAPE_NAMESPACES,
-                                     gripper_topics, INVALID_STAMP,
+from fpc_gripper.io.messages import (curvature_message, FingerPlacement, gripper_shape_markers,
+                                     GRIPPER_SHAPE_NAMESPACES, gripper_topics,
                                      MAX_CIRCLE_RADIUS, ns_to_time, rigidity_message,
                                      serialized_curvature, serialized_gripper_shape,
                                      serialized_shape,
@@ -155,27 +153,3 @@ def test_default_topic_list():
                           'finger_0/rigidity']
     assert len(topics) == 12 + 9 and '/diagnostics' in topics and 'markers' in topics
     assert 'gripper_shape' in topics and '/tf_static' in topics and '/tf' in topics
-
-
-# -- the header stamp of a serialised message (what mcap_recorder reads) ---------------------
-
-def test_the_header_stamp_of_a_serialised_message_is_read_without_decoding():
-    msg = FluidPressure(fluid_pressure=1.0e5)
-    msg.header.stamp.sec, msg.header.stamp.nanosec = 1_700_000_000, 123_456_789
-    msg.header.frame_id = 'finger_0'
-    assert cdr_header_stamp(serialize_message(msg)) == 1_700_000_000_123_456_789
-
-
-def test_a_big_endian_header_stamp_is_read_too():
-    data = b'\x00\x00\x00\x00' + struct.pack('>iI', 12, 34) + b'\x00' * 8
-    assert cdr_header_stamp(data) == 12_000_000_034
-
-
-@pytest.mark.parametrize('sec, nanosec', [(-1, 0), (5, 1_000_000_000)])
-def test_a_header_stamp_that_is_no_time_is_told_apart(sec, nanosec):
-    data = b'\x00\x01\x00\x00' + struct.pack('<iI', sec, nanosec) + b'\x00' * 8
-    assert cdr_header_stamp(data) is INVALID_STAMP
-
-
-def test_data_too_short_for_a_stamp_has_none():
-    assert cdr_header_stamp(b'\x00\x01\x00\x00\x01\x00\x00') == 0
