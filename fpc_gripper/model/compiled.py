@@ -231,27 +231,44 @@ def _forget_pool():
 os.register_at_fork(after_in_child=_forget_pool)
 
 
-def over_cores(run, count):
+def over_cores(run, count, starts=None, wait=True):
     """
     Run a serial compiled batch over the cores: ``run(lo, hi)`` on contiguous chunks.
 
     The batch entries release the GIL (nogil), so one thread per core (numba's thread
     count, which `numba.set_num_threads` lowers) runs them in parallel, as `prange`
     would, without `parallel=True`'s minutes of compiling. Every scene is computed alone,
-    so the answer does not depend on the chunks. Returns the chunks' outputs (an array
-    or a tuple of arrays) concatenated along the scenes.
+    or from the scenes before it on its chain where `starts` (the sorted indices where
+    chains start) says so; chunks then start only where a chain does, so the answer does
+    not depend on the chunks. Returns the chunks' outputs (an array or a tuple of arrays)
+    concatenated along the scenes; with `wait` False, at once a function that returns
+    them, the chunks running on the pool's threads meanwhile (the caller goes on in
+    Python). Whoever waits runs the chunks that no thread has started yet itself, so a
+    call never waits behind other batches queued on the pool.
     """
     threads = max(1, min(numba.get_num_threads(), count // _MIN_CHUNK))
-    if threads == 1:
-        return run(0, count)
     bounds = [count * k // threads for k in range(threads + 1)]
-    # The calling thread takes the first chunk; the pool's threads the others.
-    futures = [_pool(threads - 1).submit(run, lo, hi)
-               for lo, hi in zip(bounds[1:-1], bounds[2:])]
-    parts = [run(bounds[0], bounds[1])] + [future.result() for future in futures]
-    if isinstance(parts[0], tuple):
-        return tuple(np.concatenate(chunk) for chunk in zip(*parts))
-    return np.concatenate(parts)
+    if starts is not None and threads > 1:
+        # Each even split moved to the nearest chain start; a chunk that vanishes goes.
+        starts = np.asarray(starts, dtype=np.int64)
+        for k in range(1, threads):
+            bounds[k] = int(starts[np.argmin(np.abs(starts - bounds[k]))])
+        bounds = sorted(set(bounds) | {0, count})
+    chunks = list(zip(bounds[:-1], bounds[1:]))
+    if wait and len(chunks) == 1:
+        return run(0, count)
+    # Waiting, the calling thread takes the first chunk; the pool's threads the others.
+    futures = [(_pool(threads).submit(run, lo, hi), lo, hi) for lo, hi in chunks[int(wait):]]
+    first = [run(*chunks[0])] if wait else []
+
+    def collect():
+        # A chunk still queued is taken back and run here.
+        parts = first + [run(lo, hi) if future.cancel() else future.result()
+                         for future, lo, hi in futures]
+        if isinstance(parts[0], tuple):
+            return tuple(np.concatenate(chunk) for chunk in zip(*parts))
+        return np.concatenate(parts)
+    return collect() if wait else collect
 
 
 _STAMP = sources_stamp()

@@ -6,7 +6,7 @@ import numba
 import numpy as np
 
 from .solves import (_compiled, _CONTROL, _flat, _one, _packed, _rigidity_entry, _solve_entry,
-                     _WIDE, SOLVE, TIP)
+                     _WIDE, CHAIN, NO_ROWS, SOLVE, TIP)
 from ..compiled import over_cores
 
 
@@ -125,12 +125,19 @@ def _index(design, pressures, count):
     return design, pressures
 
 
-def solve_batch(problems, design, pressures, nodes, forces, options, initial=None, level=TIP):
+def solve_batch(problems, design, pressures, nodes, forces, options, initial=None, level=TIP,
+                chain=False, wait=True):
     """
     Solves of S independent scenes in compiled loops over both cores (`over_cores`).
 
     Scene i is `solve(problems[design[i]], pressures[i], loads_i, options, initial[i], level)`,
-    loads_i being `forces[i]` at `nodes`: the same arithmetic, so the same answer.
+    loads_i being `forces[i]` at `nodes`: the same arithmetic, so the same answer. With
+    `chain`, consecutive scenes of one problem and the same loads form a chain, solved in
+    order: each is warm-started from the states of the (up to three) successful scenes
+    before it on its chain, extrapolated to its pressure (a quadratic in pressure), and
+    solved as `solve` with that warm start (so from flat again where Newton from there
+    fails). A warm start changes the iterations, not the answer: it is the same to
+    round-off, whatever else the batch holds or however it is split over the cores.
 
     Parameters
     ----------
@@ -149,10 +156,16 @@ def solve_batch(problems, design, pressures, nodes, forces, options, initial=Non
         Warm starts [scaled units]; None: every scene from the flat state.
     level : {TIP, SHAPE, ALL}
         The outputs of every state (`solves.OUTPUTS`); TIP, the default, costs least.
+    chain : bool
+        Solve the scenes along their chains, as above (`initial` must then be None);
+        the caller orders each chain, by pressure for the fewest iterations.
+    wait : bool
+        False: return at once, with a function that returns the BatchOutcome when the
+        compiled loops, running on other threads meanwhile, are done (`over_cores`).
 
     Returns
     -------
-    BatchOutcome
+    BatchOutcome, or a function that returns it
 
     """
     design, pressures = _index(design, pressures, len(problems))
@@ -161,21 +174,36 @@ def solve_batch(problems, design, pressures, nodes, forces, options, initial=Non
     datas, flat, opts, cap = _batch_inputs(problems, nodes.size > 0, options)
     if initial is None:
         initial = np.zeros((0,) + flat.shape)
+    elif chain:
+        raise ValueError('`initial` must be None with `chain`: a chain starts its own scenes')
     else:
         initial = np.ascontiguousarray(initial, dtype=float)
         if initial.shape != (pressures.size,) + flat.shape:
             raise ValueError(f'`initial` must have shape {(pressures.size,) + flat.shape}, '
                              f'got {initial.shape}')
     warm = initial.shape[0] > 0
+    starts = _chain_starts(design, forces) if chain else None
 
     def run(lo, hi):
         return _solve_entry(datas, design[lo:hi], pressures[lo:hi], nodes, forces[lo:hi],
-                            initial[lo:hi] if warm else initial, flat, opts, cap, SOLVE,
-                            int(level))
-    states, figures, shapes = over_cores(run, pressures.size)
+                            initial[lo:hi] if warm else initial, flat, opts, cap,
+                            CHAIN if chain else SOLVE, int(level) + NO_ROWS)
+    out = over_cores(run, pressures.size, starts, wait)
+    return _outcome(*out) if wait else lambda: _outcome(*out())
+
+
+def _outcome(states, figures, shapes):
+    """Return the BatchOutcome of a `_solve_entry` call (its flat output rows: none)."""
     return BatchOutcome(states, figures[:, 10].astype(np.int64),
                         figures[:, 11].astype(np.int64), *figures[:, :4].T, figures[:, 4:6],
                         figures[:, 7] == 1.0, *figures[:, [6, 8, 9]].T)
+
+
+def _chain_starts(design, forces):
+    """Return the scenes that start a chain (`solve_batch`): a new problem or new loads."""
+    new = np.ones(design.size, dtype=bool)
+    new[1:] = (design[1:] != design[:-1]) | np.any(forces[1:] != forces[:-1], axis=(1, 2))
+    return np.flatnonzero(new)
 
 
 def rigidity_batch(problems, design, pressures, node, direction, displacement, options):
