@@ -1,6 +1,7 @@
 """Many independent scenes at once: designs x pressures x tip forces on the compiled engine."""
 
 import functools
+import math
 
 import numpy as np
 
@@ -12,7 +13,7 @@ from .pipeline import finger_model, ModelSettings, rung_label, solver_label
 from .result import Result
 from .selection import AdaptiveSolver
 from .stiffness import checked_rigidity, classify, direct_stiffness, RigidityStatus
-from .validation import check_load, check_outputs, OUTPUT_LEVELS
+from .validation import check_load, check_outputs, OUTPUT_LEVELS, warm_start_allowed
 
 __all__ = ['solve_grid', 'rigidity_grid', 'check_pressures', 'GRID_FIELDS',
            'RIGIDITY_GRID_FIELDS']
@@ -121,38 +122,62 @@ class _Groups:
     """
     Scenes grouped by the compiled batch that solves them.
 
-    A group has one discretisation type, size, sample count and options, and one loading
-    (loaded or not); it lists its distinct solvers.
+    A group has one discretisation type, size, sample count and options, one loading
+    (loaded or not) and chains or none (`engine.solve_batch`); it lists its solvers,
+    once per design, so that a chain never runs from one design's scenes into another's.
     """
 
     def __init__(self):
         self.groups = {}
         self._keys = {}
+        self.scenes = 0
 
-    def _key(self, solver, loaded):
-        memo = (id(solver), loaded)
+    def _key(self, solver, loaded, chain):
+        memo = (id(solver), loaded, chain)
         key = self._keys.get(memo)
         if key is None:
             key = self._keys[memo] = (engine.batch_key(solver.engine_problem, solver._options,
                                                        loaded), solver.n_segments,
                                       getattr(solver, 'samples', None),
-                                      getattr(solver, 'samples_per_segment', None), loaded)
+                                      getattr(solver, 'samples_per_segment', None), loaded,
+                                      chain)
         return key
 
-    def add(self, solver, loaded, scenes):
-        """Add scenes (indices) that `solver` solves, loaded or not."""
-        group = self.groups.setdefault(self._key(solver, loaded),
+    def add(self, solver, design, loaded, chain, scenes):
+        """Add scenes (indices, in chain order) that `solver` solves for design `design`."""
+        group = self.groups.setdefault(self._key(solver, loaded, chain),
                                        {'solvers': [], 'slot': {}, 'scenes': [], 'slots': []})
-        slot = group['slot'].setdefault(id(solver), len(group['solvers']))
+        slot = group['slot'].setdefault((id(solver), design), len(group['solvers']))
         if slot == len(group['solvers']):
             group['solvers'].append(solver)
         group['scenes'].append(np.asarray(scenes, dtype=np.int64))
         group['slots'].append(np.full(len(scenes), slot, dtype=np.int64))
+        self.scenes += len(scenes)
 
     def __iter__(self):
         for key, group in self.groups.items():
-            yield key[-1], group['solvers'], np.concatenate(group['scenes']), \
+            yield key[-2], key[-1], group['solvers'], np.concatenate(group['scenes']), \
                 np.concatenate(group['slots'])
+
+
+def _add_chains(groups, solver, design, loaded, local, base, pressures, forces, chain):
+    """
+    Add a design's scenes of one solver to `groups`, along pressure where `chain` allows.
+
+    `local` are the scenes' indices p F + f in the design's block. A scene whose total load
+    lets a warm start in (`validation.warm_start_allowed`, as the single solve asks) joins
+    the chain of its tip force, ordered by pressure; the others are solved cold.
+    """
+    local = np.asarray(local, dtype=np.int64)
+    p, f = np.divmod(local, forces.shape[0])
+    warm = np.array([warm_start_allowed(math.hypot(*forces[k])) for k in range(forces.shape[0])])
+    along = chain & warm[f]
+    if along.any():
+        # By force, then by pressure (stable: equal pressures keep their order).
+        order = np.lexsort((pressures[p[along]], f[along]))
+        groups.add(solver, design, loaded, True, base + local[along][order])
+    if not along.all():
+        groups.add(solver, design, loaded, False, base + local[~along])
 
 
 class _Grid:
@@ -179,13 +204,14 @@ class _Grid:
         self.batches = []
         self.singles = {}
         self.models_of = [None] * len(designs)
-        self.choices = {}
+        # Every scene's adaptive model choice (None: a model of one rung).
+        self.choices = np.full(count, None, dtype=object)
 
     def spec(self, scene):
         """(model, choice, pressure [Pa], tip force [N]) of a flat scene index."""
         d, p, f = np.unravel_index(scene, self.shape)
         force = self.tip_forces[f]
-        return (self.models_of[d], self.choices.get(scene), float(self.pressures[p]),
+        return (self.models_of[d], self.choices[scene], float(self.pressures[p]),
                 (float(force[0]), float(force[1])))
 
     def single(self, scene, result):
@@ -245,12 +271,17 @@ def _choices(model, pressures, forces):
     """Return the solver each scene's single solve uses first, and its model choice."""
     if isinstance(model, AdaptiveSolver):
         choices = model.choose_many(pressures, forces)
-        return [model.solver_for(c.rung, c.n_segments) for c in choices], choices
+        # A few models for many scenes: each solver looked up once.
+        solvers = {}
+        for c in choices:
+            if (c.rung, c.n_segments) not in solvers:
+                solvers[c.rung, c.n_segments] = model.solver_for(c.rung, c.n_segments)
+        return [solvers[c.rung, c.n_segments] for c in choices], choices
     return [model] * len(pressures), [None] * len(pressures)
 
 
 def solve_grid(designs, pressures, tip_forces=((0.0, 0.0),), settings=ModelSettings(), *,
-               outputs='tip'):
+               outputs='tip', chain=True):
     """
     Solve every design x pressure x tip force on the compiled engine, over both cores.
 
@@ -259,9 +290,13 @@ def solve_grid(designs, pressures, tip_forces=((0.0, 0.0),), settings=ModelSetti
     CCM8). Scenes are grouped by discretisation and solved in compiled batches
     (`engine.solve_batch`); a scene whose adaptive model refines (a CCM rung whose
     first solve fails or breaks the small-rotation rule), or whose model does not run
-    compiled, is finished by the single solve, which does exactly that. Every scene is
-    solved cold, exactly as its single solve solves it (the same model and arithmetic,
-    so the same answer); only the order of work differs.
+    compiled, is finished by the single solve, which does exactly that. With `chain`
+    (the default) a design's scenes of one model and tip force are solved along
+    pressure, lowest first, each warm-started from the ones before it (as the single
+    solve's `initial`, where it allows one: up to `validation.UNIQUE_LOAD` of load):
+    a third of the Newton iterations, and the answer of the cold single solve to
+    round-off, whichever other scenes the grid holds. Without, every scene is solved
+    cold, exactly as its single solve (the same iterations and arithmetic).
 
     Parameters
     ----------
@@ -274,6 +309,8 @@ def solve_grid(designs, pressures, tip_forces=((0.0, 0.0),), settings=ModelSetti
     outputs : {'tip', 'shape', 'all'}
         'tip' (the default): the states' tips and validity; 'shape' also the energy;
         'all' also the circle fit of every scene's samples (in the same compiled calls).
+    chain : bool
+        Warm-start the scenes along pressure, as above; False: every scene cold.
 
     Returns
     -------
@@ -294,12 +331,33 @@ def solve_grid(designs, pressures, tip_forces=((0.0, 0.0),), settings=ModelSetti
     _in_envelope(designs, pressures, forces)
     settings = _settings(settings)
     out = _Grid(designs, pressures, forces, settings, level)
+    pending = _build(out, designs, settings, bool(chain))
+    memo = {}
+    for loaded, solvers, index, slots, batch in pending:
+        _store(out, batch(), solvers, index, slots, loaded, memo)
+    return out.finish()
+
+
+#: Scenes of the designs built so far above which `solve_grid` sends them to be solved.
+_FLUSH_SCENES = 160
+
+
+def _build(out, designs, settings, chain):
+    """
+    Build every design's model and start its scenes' batches; return the pending batches.
+
+    A scene that a batch does not give is solved alone here. The batches of every few
+    designs start as soon as these are built (`_submit`): their compiled loops run on
+    the batch threads while the next designs' models are built.
+    """
+    pressures, forces = out.pressures, out.tip_forces
     n_p, n_f = pressures.size, forces.shape[0]
     per_design = n_p * n_f
     scene_p = [float(p) for p in np.repeat(pressures, n_f)]
     scene_f = [(float(f[0]), float(f[1])) for f in np.tile(forces, (n_p, 1))]
-    scene_loaded = np.tile(np.any(forces != 0.0, axis=1), n_p)
+    scene_loaded = np.tile(np.any(forces != 0.0, axis=1), n_p).tolist()
     groups = _Groups()
+    pending = []
     for d, design in enumerate(designs):
         model = out.models_of[d] = finger_model(design, settings)
         base = d * per_design
@@ -307,54 +365,85 @@ def solve_grid(designs, pressures, tip_forces=((0.0, 0.0),), settings=ModelSetti
             # One solver for the whole design: its loaded and unloaded scenes as two blocks,
             # each batched, or its own solves where a batch would not give them (the rod).
             for loaded in (False, True):
-                local = np.flatnonzero(scene_loaded == loaded)
+                local = np.flatnonzero(np.array(scene_loaded) == loaded)
                 if local.size and _batched(model, loaded):
-                    groups.add(model, loaded, base + local)
+                    _add_chains(groups, model, d, loaded, local, base, pressures, forces,
+                                chain)
                     continue
                 for k in local:
                     out.single(base + k, model.solve(scene_p[k], scene_f[k]))
+        else:
+            blocks = {}
+            solvers, choices = _choices(model, scene_p, scene_f)
+            out.choices[base:base + per_design] = choices
+            for k, (solver, loaded) in enumerate(zip(solvers, scene_loaded)):
+                block = blocks.get((id(solver), loaded))
+                if block is None:
+                    block = blocks[id(solver), loaded] = (solver, [], _batched(solver, loaded))
+                if block[2]:
+                    block[1].append(k)
+                else:
+                    # A rung that a batch does not give (the rod): its own solve.
+                    out.single(base + k, model.solve(scene_p[k], scene_f[k]))
+            for (_, loaded), (solver, local, batched) in blocks.items():
+                if batched:
+                    _add_chains(groups, solver, d, loaded, local, base, pressures, forces,
+                                chain)
+        if groups.scenes >= _FLUSH_SCENES or d == len(designs) - 1:
+            pending += [_submit(group, pressures, forces, out.level) for group in groups]
+            groups = _Groups()
+    return pending
+
+
+def _submit(group, pressures, forces, level):
+    """Start the compiled batch of a group; return it with (loaded, solvers, index, slots)."""
+    loaded, chained, solvers, index, slots = group
+    n_f = forces.shape[0]
+    local = index % (pressures.size * n_f)
+    force = forces[local % n_f].reshape(index.size, 1, 2)
+    nodes = np.array([solvers[0].n_segments] if loaded else [], dtype=np.int64)
+    batch = engine.solve_batch([s.engine_problem for s in solvers], slots,
+                               pressures[local // n_f], nodes, force if loaded else force[:, :0],
+                               solvers[0]._options, level=min(level, _ALL), chain=chained,
+                               wait=False)
+    return loaded, solvers, index, slots, batch
+
+
+def _store(out, batch, solvers, index, slots, loaded, memo):
+    """Store a group's batch in the grid; a scene whose adaptive model refines is solved alone."""
+    out.batches.append((batch, solvers, slots, loaded))
+    out.batch_of[index] = len(out.batches) - 1
+    out.row[index] = np.arange(index.size)
+    out.status[index] = batch.status
+    out.success[index] = batch.status == int(SolverStatus.SUCCESS)
+    out.iterations[index] = batch.iterations
+    out.tip[index] = batch.tips
+    out.valid[index] = batch.valid
+    out.figures[index] = np.stack([batch.energy, batch.curvature, batch.fit_rmsd], axis=1)
+    choices = out.choices[index].tolist()
+    if any(choice is None for choice in choices):
+        out.models[index] = solver_label(solvers[0])
+    design = (index // (out.shape[1] * out.shape[2])).tolist()
+    success, valid = out.success[index].tolist(), out.valid[index].tolist()
+    labelled, labels = [], []
+    for k, choice in enumerate(choices):
+        if choice is None:
             continue
-        blocks = {}
-        for k, (solver, choice) in enumerate(zip(*_choices(model, scene_p, scene_f))):
-            scene = base + k
-            out.choices[scene] = choice
-            if _batched(solver, bool(scene_loaded[k])):
-                blocks.setdefault((id(solver), bool(scene_loaded[k])), (solver, []))[1] \
-                    .append(scene)
-            else:
-                # A rung that a batch does not give (the rod): its own solve.
-                out.single(scene, model.solve(scene_p[k], scene_f[k]))
-        for (_, loaded), (solver, scenes) in blocks.items():
-            groups.add(solver, loaded, scenes)
-    for loaded, solvers, index, slots in groups:
-        local = index % per_design
-        pressure = np.repeat(pressures, n_f)[local]
-        force = np.tile(forces, (n_p, 1))[local].reshape(index.size, 1, 2)
-        nodes = np.array([solvers[0].n_segments] if loaded else [], dtype=np.int64)
-        batch = engine.solve_batch([s.engine_problem for s in solvers], slots, pressure, nodes,
-                                   force if loaded else force[:, :0], solvers[0]._options,
-                                   level=min(level, _ALL))
-        out.batches.append((batch, solvers, slots, loaded))
-        out.batch_of[index] = len(out.batches) - 1
-        out.row[index] = np.arange(index.size)
-        out.status[index] = batch.status
-        out.success[index] = batch.status == int(SolverStatus.SUCCESS)
-        out.iterations[index] = batch.iterations
-        out.tip[index] = batch.tips
-        out.valid[index] = batch.valid
-        out.figures[index] = np.stack([batch.energy, batch.curvature, batch.fit_rmsd], axis=1)
-        adaptive = [k for k, scene in enumerate(index) if scene in out.choices]
-        if len(adaptive) < index.size:
-            out.models[index] = solver_label(solvers[0])
-        for k in adaptive:
-            scene = index[k]
-            model, choice = out.models_of[scene // per_design], out.choices[scene]
-            if model.refines(choice.rung, choice.n_segments,
-                             _Verdict(out.success[scene], out.valid[scene])):
-                out.single(scene, model.solve(*out.spec(scene)[2:]))
-            else:
-                out.models[scene] = rung_label(choice.rung, choice.n_segments)
-    return out.finish()
+        # The verdict depends on these alone: asked once per grid.
+        key = (design[k], choice.rung, choice.n_segments, success[k], valid[k])
+        verdict = memo.get(key)
+        if verdict is None:
+            verdict = memo[key] = (out.models_of[design[k]].refines(
+                choice.rung, choice.n_segments, _Verdict(success[k], valid[k])),
+                rung_label(choice.rung, choice.n_segments))
+        if verdict[0]:
+            scene = int(index[k])
+            out.single(scene, out.models_of[design[k]].solve(*out.spec(scene)[2:]))
+        else:
+            labelled.append(index[k])
+            labels.append(verdict[1])
+    if labelled:
+        out.models[labelled] = np.array(labels, dtype=object)
 
 
 class _Verdict:
@@ -433,7 +522,7 @@ def rigidity_grid(designs, pressures, axis='x', displacement=0.010, settings=Mod
     groups = _Groups()
     scenes = []
     scene_p = [float(p) for p in pressures]
-    for design in designs:
+    for d, design in enumerate(designs):
         model = finger_model(design, settings)
         solvers, choices = _choices(model, scene_p, [(0.0, 0.0)] * len(scene_p))
         blocks = {}
@@ -447,9 +536,9 @@ def rigidity_grid(designs, pressures, axis='x', displacement=0.010, settings=Mod
                 _store_rigidity(out, scene, checked_rigidity(
                     solver, solver.rigidity(pressure, axis, delta)), choice, solver)
         for solver, block in blocks.values():
-            groups.add(solver, False, block)
+            groups.add(solver, d, False, False, block)
     k = 0 if axis == 'x' else 1
-    for _, solvers, index, slots in groups:
+    for _, _, solvers, index, slots in groups:
         pressure = np.array([scenes[i][1] for i in index])
         batch = engine.rigidity_batch([s.engine_problem for s in solvers], slots, pressure,
                                       solvers[0].n_segments, AXES[axis], delta,
