@@ -77,6 +77,11 @@ def test_edges_have_one_section_type_per_segment():
         if n >= 64:
             # As even as possible: within one interval's rounding of the mean length.
             assert lengths.max() <= 1.6 * design.free_length / n
+        # Each interval cut evenly: its edges as np.linspace places them.
+        counts = np.diff(np.searchsorted(edges, breaks))
+        even = np.concatenate([*(np.linspace(a, b, c + 1)[:-1]
+                                 for a, b, c in zip(breaks, breaks[1:], counts)), breaks[-1:]])
+        np.testing.assert_allclose(edges, even, rtol=0, atol=1e-15)
     assert PCCSolver(uniform_design(0.25), 1).n_segments == 1
     assert PCCSolver(design, 8).n_segments == 22
 

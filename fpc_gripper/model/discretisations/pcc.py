@@ -80,9 +80,14 @@ def pcc_edges(design, n_segments):
 
     """
     breaks, types, law = station_layout(design, ribs='exact')
-    counts = share_segments(np.diff(breaks), max(int(n_segments), types.size))
-    edges = np.concatenate([*(np.linspace(a, b, c + 1)[:-1]
-                              for a, b, c in zip(breaks, breaks[1:], counts)), breaks[-1:]])
+    spans = np.diff(breaks)
+    counts = share_segments(spans, max(int(n_segments), types.size))
+    # Every interval's np.linspace(a, b, c + 1)[:-1], a + k (b - a) / c, all at once: the
+    # same operations, so the same edges, without a call per interval.
+    first = np.repeat(np.cumsum(counts) - counts, counts)
+    k = np.arange(counts.sum(), dtype=float) - first
+    edges = np.concatenate([k * np.repeat(spans / counts, counts)
+                            + np.repeat(breaks[:-1], counts), breaks[-1:]])
     return edges, np.repeat(types, counts), law
 
 
