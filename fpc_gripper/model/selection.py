@@ -1,6 +1,7 @@
 """Model selection on the ladder (arc, CCM-N, rod) and automatic segment refinement."""
 
 import bisect
+import collections
 import dataclasses
 from dataclasses import dataclass
 import functools
@@ -9,7 +10,6 @@ import math
 import pathlib
 
 import numpy as np
-from scipy.interpolate import PchipInterpolator
 
 from . import engine
 from .design import ActuatorDesign
@@ -191,9 +191,54 @@ _FEATURE_STEP = 5e3
 _FEATURE_CACHE = 256
 
 
+#: A piecewise cubic as scipy's PPoly holds it: breakpoints x (K + 1,) and coefficients
+#: c (4, K), highest power first, in powers of the distance from each interval's start.
+_Pieces = collections.namedtuple('_Pieces', ('x', 'c'))
+
+
+def _pchip(x, y):
+    """
+    Return scipy's PchipInterpolator(x, y) as `_Pieces`: the same operations, the same bits.
+
+    scipy builds it in about 250 us, most of it checks and array dispatch; these are its
+    derivatives (`_find_derivatives`, with the one-sided ends of `_edge_case`) and its
+    Hermite coefficients (`CubicHermiteSpline`), for 1-d float x (increasing) and y.
+    """
+    h = x[1:] - x[:-1]
+    m = (y[1:] - y[:-1]) / h
+    d = np.zeros_like(y)
+    if y.size == 2:
+        d[:] = m[0]
+    else:
+        sign = np.sign(m)
+        flat = (sign[1:] != sign[:-1]) | (m[1:] == 0) | (m[:-1] == 0)
+        w1 = 2 * h[1:] + h[:-1]
+        w2 = h[1:] + 2 * h[:-1]
+        # The slopes' weighted harmonic mean; where one is 0 it is not used (`flat`).
+        with np.errstate(divide='ignore', invalid='ignore'):
+            mean = (w1 / m[:-1] + w2 / m[1:]) / (w1 + w2)
+        d[1:-1][~flat] = 1.0 / mean[~flat]
+        d[0] = _pchip_end(h[0], h[1], m[0], m[1])
+        d[-1] = _pchip_end(h[-1], h[-2], m[-1], m[-2])
+    dx = np.diff(x)
+    slope = np.diff(y) / dx
+    t = (d[:-1] + d[1:] - 2 * slope) / dx
+    return _Pieces(x, np.stack((t / dx, (slope - d[:-1]) / dx - t, d[:-1], y[:-1])))
+
+
+def _pchip_end(h0, h1, m0, m1):
+    """Return PCHIP's end derivative: the one-sided three-point estimate, shape-preserving."""
+    d = ((2 * h0 + h1) * m0 - h0 * m1) / (h0 + h1)
+    if np.sign(d) != np.sign(m0):
+        return 0.0
+    if np.sign(m0) != np.sign(m1) and abs(d) > 3.0 * abs(m0):
+        return 3.0 * m0
+    return d
+
+
 class _Cubic:
     """
-    A piecewise cubic (scipy's PPoly, as PCHIP builds it) at one point, in plain floats.
+    A piecewise cubic (scipy's PPoly, as PCHIP builds it: `_pchip`) at one point, in floats.
 
     scipy's own call costs 17-19 us, of which the arithmetic is nothing; this one finds the
     interval as scipy's `find_interval` does (closed on the right at the last breakpoint)
@@ -202,8 +247,9 @@ class _Cubic:
     """
 
     def __init__(self, ppoly):
-        self.x = [float(v) for v in ppoly.x]
-        self.c = [tuple(float(v) for v in column) for column in ppoly.c.T]
+        # tolist: the same values as Python floats, in one call.
+        self.x = ppoly.x.tolist()
+        self.c = [tuple(column) for column in ppoly.c.T.tolist()]
 
     def __call__(self, xval):
         """Return the cubic at `xval`, a float inside the breakpoints."""
@@ -211,6 +257,21 @@ class _Cubic:
         i = min(max(bisect.bisect_right(x, xval) - 1, 0), len(x) - 2)
         c0, c1, c2, c3 = self.c[i]
         s = xval - x[i]
+        res = 0.0 + c3 * 1.0 * 1.0
+        z = s
+        res = res + c2 * z * 1.0
+        z = z * s
+        res = res + c1 * z * 1.0
+        z = z * s
+        return res + c0 * z * 1.0
+
+    def many(self, xvals):
+        """Return the cubic at every point of `xvals` (an array inside the breakpoints)."""
+        # The terms of `__call__`, elementwise in the same order: the same bits.
+        x = np.asarray(self.x)
+        i = np.clip(np.searchsorted(x, xvals, side='right') - 1, 0, x.size - 2)
+        c0, c1, c2, c3 = np.asarray(self.c)[i].T
+        s = xvals - x[i]
         res = 0.0 + c3 * 1.0 * 1.0
         z = s
         res = res + c2 * z * 1.0
@@ -238,9 +299,10 @@ class _ArcFeature:
         # Signed: |beta| has a kink where the finger passes flat.
         self.table = None
         if all(x is not None for x in self.states):
-            # The turning from the state, as the result's beta[0]: no samples are built.
-            self.table = _Cubic(PchipInterpolator(
-                self.grid, [float(self.arc.turning(self.arc._unpack(x))) for x in self.states]))
+            # The turning from the state, as the result's beta[0]: no samples are built (the
+            # states as columns: every pressure's in one call, by the same operations).
+            self.table = _Cubic(_pchip(
+                self.grid, self.arc.turning(self.arc._unpack(np.array(self.states)).T)))
         self._loaded = {}
 
     def _table_states(self):
@@ -314,8 +376,9 @@ class _ArcFeature:
         index, starts = [], []
         tabled = [k for k, (p, f) in enumerate(zip(pressures, tip_forces)) if self._tabled(p, f)]
         if tabled:
-            for k in tabled:
-                out[k] = abs(self.table(pressures[k]))
+            values = np.abs(self.table.many(np.array([pressures[k] for k in tabled]))).tolist()
+            for k, value in zip(tabled, values):
+                out[k] = value
         for k, (pressure, force) in enumerate(zip(pressures, tip_forces)):
             if out[k] is not None:
                 continue
@@ -443,6 +506,27 @@ def _scene_bin(model, prestrain, pressure, load, turning):
             bisect.bisect_left(load_edges, load * (1 - 1e-12)))
 
 
+def _scene_bins(model, prestrain, pressures, loads, turnings):
+    """
+    Return `_scene_bin` of many scenes (sequences of floats), those inside the ranges at once.
+
+    Inside, a cell is the same two bisections, done by searchsorted on arrays; a scene
+    outside (or with a turning that is not finite) gets `_scene_bin` itself.
+    """
+    ranges = model['ranges']
+    turn_edges, load_edges = model['turning_bins'], model['load_bins']
+    pressure, load, turning = (np.asarray(v, dtype=float)
+                               for v in (pressures, loads, turnings))
+    inside = (ranges['prestrain'][0] <= prestrain <= ranges['prestrain'][1]) \
+        & (pressure <= ranges['pressure'][1]) & (load <= load_edges[-1] * (1 + 1e-12)) \
+        & np.isfinite(turning) & (turning <= turn_edges[-1])
+    t_bin = np.searchsorted(turn_edges, turning, side='left').tolist()
+    l_bin = np.searchsorted(load_edges, load * (1 - 1e-12), side='left').tolist()
+    return [(t_bin[k], l_bin[k]) if inside[k] else
+            _scene_bin(model, prestrain, pressures[k], loads[k], turnings[k])
+            for k in range(pressure.size)]
+
+
 def _static_cost(entry):
     """Sort key of a model: its static cost, then its rung and N (never a measured time)."""
     if 'cost' not in entry:
@@ -474,6 +558,25 @@ def _choose(model, cell, tolerance):
                                f'<= {tolerance:g} m at {where}', float(entry['cost']))
     return ModelChoice('rod', 0, 0.0, f'no cheaper model meets {tolerance:g} m at {where}',
                        rod_cost)
+
+
+#: `_choose` by (error model, cell, tolerance), shared by every solver: a choice depends on
+#: these alone (error models are read-only), and a sweep's many fresh solvers meet the same
+#: few cells. Each entry keeps its error model, so that its id stays its own.
+_CHOSEN = {}
+#: Entries of `_CHOSEN` before it starts again (cells outside the ranges are many).
+_CHOSEN_LIMIT = 4096
+
+
+def _chosen(model, cell, tolerance):
+    """Return `_choose(model, cell, tolerance)`, computed once."""
+    key = (id(model), cell, tolerance)
+    hit = _CHOSEN.get(key)
+    if hit is None or hit[0] is not model:
+        if len(_CHOSEN) >= _CHOSEN_LIMIT:
+            _CHOSEN.clear()
+        hit = _CHOSEN[key] = (model, _choose(model, cell, tolerance))
+    return hit[1]
 
 
 def a_posteriori_error(scene, rung, n_segments):
@@ -562,20 +665,30 @@ class AdaptiveSolver:
         return self._choice(pressure, force, self._feature.turning(pressure, force))
 
     def choose_many(self, pressures, tip_forces):
-        """Return `choose` of many scenes; their loaded arc features are solved as a batch."""
+        """
+        Return `choose` of many scenes: the same choices, for less than a `choose` each.
+
+        Their features come together (`_ArcFeature.turnings`: the table read at once, the
+        loaded arcs solved as one batch), and so do the cells (`_scene_bins`).
+        """
         scenes = [check_load(p, f, self.design.max_pressure)
                   for p, f in zip(pressures, tip_forces)]
         if not scenes:
             return []
-        turnings = self._feature.turnings([p for p, _ in scenes], [f for _, f in scenes])
-        return [self._choice(p, f, turning) for (p, f), turning in zip(scenes, turnings)]
+        forces = [f for _, f in scenes]
+        turnings = self._feature.turnings([p for p, _ in scenes], forces)
+        cells = _scene_bins(self._model, self.design.prestrain, [p for p, _ in scenes],
+                            [math.hypot(*f) for f in forces], turnings)
+        return [self._cell_choice(cell) for cell in cells]
 
     def _choice(self, pressure, force, turning):
-        cell = _scene_bin(self._model, self.design.prestrain, pressure, math.hypot(*force),
-                          turning)
+        return self._cell_choice(_scene_bin(self._model, self.design.prestrain, pressure,
+                                            math.hypot(*force), turning))
+
+    def _cell_choice(self, cell):
         choice = self._choices.get(cell)
         if choice is None:
-            choice = self._choices[cell] = _choose(self._model, cell, self.tolerance)
+            choice = self._choices[cell] = _chosen(self._model, cell, self.tolerance)
         return choice
 
     def solver_for(self, rung, n_segments):

@@ -70,15 +70,39 @@ def test_default_model_meets_its_tolerance_off_the_ladder(designs, prestrain, pr
     assert np.linalg.norm(result.tip - rod.tip) <= DEFAULT_TOLERANCE, result.model_choice
 
 
-def test_the_feature_table_evaluates_as_scipy_does():
-    # The unloaded feature table's cubic (`selection._Cubic`, plain floats) gives scipy's
-    # PCHIP bits at random points, at every breakpoint and at both ends.
+@pytest.mark.parametrize('shape', ['smooth', 'flat-ends', 'steps'])
+def test_the_feature_table_evaluates_as_scipy_does(shape):
+    # The unloaded feature table's cubic (`selection._pchip`, evaluated by `_Cubic` in plain
+    # floats) gives scipy's PCHIP bits at random points, at every breakpoint and at both
+    # ends: through a turn of the slope, flat pieces, and ends where the one-sided estimate
+    # is clipped to 0 or to 3 times the end slope.
     from scipy.interpolate import PchipInterpolator
 
-    from fpc_gripper.model.selection import _Cubic
+    from fpc_gripper.model.selection import _Cubic, _pchip
     grid = np.linspace(0.0, 6e5, 121)
-    values = np.sin(grid / 1.7e5) * 2.0 + grid * 1e-6
+    values = {'smooth': np.sin(grid / 1.7e5) * 2.0 + grid * 1e-6,
+              'flat-ends': np.clip(np.sin(grid / 1.1e5), -0.6, 0.8),
+              'steps': np.round(np.sin(grid / 0.9e5) * 3.0) + np.cos(grid / 4e4)}[shape]
     reference = PchipInterpolator(grid, values)
-    cubic = _Cubic(reference)
+    np.testing.assert_allclose(_pchip(grid, values).c, reference.c, rtol=1e-15, atol=0)
+    cubic = _Cubic(_pchip(grid, values))
     points = np.concatenate([np.random.default_rng(7).uniform(0.0, 6e5, 5000), grid])
     np.testing.assert_array_equal([cubic(float(p)) for p in points], reference(points))
+
+
+@pytest.mark.parametrize('tolerance', [5e-5, 1e-3, 2e-2])
+def test_many_choices_are_each_scene_chosen_alone(tolerance):
+    # `choose_many` (the grids' path: the feature table read at once, cells binned at
+    # once) against `choose` scene by scene on fresh solvers, inside and outside the error
+    # model's ranges: past its pressures and loads, and prestrains below and above it.
+    pressures = np.linspace(0.0, 800e3, 81)
+    forces = [(0.0, 0.0), (0.3, -0.2), (0.0, -2.0), (1.2, 0.9), (-4.0, 2.0)]
+    scenes = [(float(p), f) for p in pressures for f in forces]
+    models = set()
+    for prestrain in (0.1, 0.15, 0.3, 0.45):
+        design = ActuatorDesign.paper(prestrain).replace(Cy=0.026)
+        many = AdaptiveSolver(design, tolerance).choose_many(*zip(*scenes))
+        alone = AdaptiveSolver(design, tolerance)
+        assert many == [alone.choose(p, f) for p, f in scenes]
+        models |= {(c.rung, c.n_segments) for c in many}
+    assert len(models) >= 2 and ('rod', 0) in models, models
