@@ -9,7 +9,7 @@ from fpc_gripper.model.discretisations.ccm import SolverStatus
 from fpc_gripper.model.pipeline import DEFAULT_N_SEGMENTS, ModelSettings
 from fpc_gripper.model.stiffness import RigidityStatus
 from .grid import base_design, DEFAULT_PRESSURES, design_grid
-from .runner import run_chunks, shows_progress
+from .runner import run_chunks
 
 __all__ = ['sweep', 'model_settings', 'settings_label', 'solve_designs',
            'MODELS', 'STATUS_OK', 'STATUS_INVALID', 'STATUS_SMALL_ROTATION', 'STATUS_RIGIDITY']
@@ -27,8 +27,12 @@ STATUS_SMALL_ROTATION = 'small_rotation'
 #: 'branch_change' (its value is kept, beside the direct stiffness).
 STATUS_RIGIDITY = 'rigidity_failed'
 _SOLVER_STATUS = {int(s): s.name.lower() for s in SolverStatus}
-#: Scenes of a local run above which it is chunked for progress lines off a terminal.
-_SCENES_FOR_PROGRESS = 4000
+#: Work of a local run, in scene solves, from which it is chunked for progress: about a
+#: second on two cores (the default model solves some 30k sweep scenes a second). Progress
+#: shows once a run has taken a second, so a shorter run goes as one batch, the fastest.
+_WORK_FOR_PROGRESS = 32_000
+#: Scene solves that a scene's rigidity along one axis costs, in that count.
+_RIGIDITY_WORK = 8
 #: Tasks of a Dask run, or steps of a progress bar, when the caller does not say.
 _CHUNKS = 16
 
@@ -187,8 +191,9 @@ def sweep(vary=None, pressures=None, design=None, model='default', rigidity=Fals
         None: this process (compiled loops on every core). ``'local:N'`` or
         ``'tcp://host:port'``: Dask (`runner.run_chunks`; needs ``fpc_gripper[dask]``).
     chunk_designs : int, optional
-        Designs per task. Default: about 16 tasks on Dask or with a progress bar, else one
-        batch of every design. Any chunking gives the same rows.
+        Designs per task. Default: about 16 tasks on Dask, or for progress in a run long
+        enough to show it (about a second: 32k scenes, a rigidity axis counting as 8),
+        else one batch of every design. Any chunking gives the same rows.
     progress : bool, optional
         Progress bar on stderr for runs over a second (default: when it is a terminal).
 
@@ -223,12 +228,10 @@ def sweep(vary=None, pressures=None, design=None, model='default', rigidity=Fals
     columns, points = design_grid(base, vary, scale_w1)
     if chunk_designs is None:
         # One batch is fastest (designs of one discretisation and options share compiled
-        # loops); tasks for Dask and for a progress bar. No chunking changes a row.
-        # Off a terminal progress is a line every few seconds: chunk the runs that may
-        # take that long.
-        scenes = len(points) * pressures.size
-        whole = scheduler is None and (progress is False or (
-            not shows_progress(progress) and scenes < _SCENES_FOR_PROGRESS))
+        # loops, and a batch's last compiled loops leave a core idle); tasks for Dask and
+        # for progress, of runs long enough to show any. No chunking changes a row.
+        work = len(points) * pressures.size * (1 + _RIGIDITY_WORK * len(axes))
+        whole = scheduler is None and (progress is False or work < _WORK_FOR_PROGRESS)
         size = len(points) if whole else max(1, math.ceil(len(points) / _CHUNKS))
     else:
         size = int(chunk_designs)

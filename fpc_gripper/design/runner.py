@@ -3,11 +3,10 @@
 import contextlib
 import logging
 import os
-import sys
 
 from fpc_gripper.progress import Progress
 
-__all__ = ['run_chunks', 'dask_available', 'shows_progress', 'DASK_HINT']
+__all__ = ['run_chunks', 'dask_available', 'DASK_HINT']
 
 #: How to get the optional Dask extra.
 DASK_HINT = "install the Dask extra (pip install 'fpc_gripper[dask]') to run on a cluster"
@@ -21,11 +20,6 @@ def dask_available():
     except ImportError:
         return False
     return True
-
-
-def shows_progress(progress):
-    """Whether a run shows a progress bar: as asked, else when stderr is a terminal."""
-    return sys.stderr.isatty() if progress is None else bool(progress)
 
 
 def _bar(total, progress, unit):

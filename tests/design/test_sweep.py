@@ -170,6 +170,26 @@ def test_chunking_does_not_change_a_row():
     pd.testing.assert_frame_equal(one, all_, check_exact=True)
 
 
+def test_only_runs_long_enough_to_show_progress_are_chunked(monkeypatch):
+    # Progress shows once a run has taken a second: a shorter run goes as one batch, a
+    # rigidity axis weighing as 8 solves. Scaled down: 4 designs x 5 pressures, 20 scenes.
+    from fpc_gripper.design import parametric
+    chunks = []
+    run_chunks = parametric.run_chunks
+
+    def counted(function, parts, *args, **kwargs):
+        chunks.append(len(parts))
+        return run_chunks(function, parts, *args, **kwargs)
+    monkeypatch.setattr(parametric, 'run_chunks', counted)
+    monkeypatch.setattr(parametric, '_WORK_FOR_PROGRESS', 100)
+    vary = {'prestrain': (0.15, 0.40), 'Cy': (0.024, 0.030)}
+    pressures = np.linspace(0.0, 200e3, 5)
+    sweep(vary, pressures, model='paper')
+    sweep(vary, pressures, model='paper', rigidity='x')
+    sweep(vary, pressures, model='paper', rigidity='x', progress=False)
+    assert chunks == [1, 4, 1]
+
+
 def test_base_design_from_yaml(tmp_path):
     path = tmp_path / 'finger.yaml'
     ActuatorDesign.paper(0.40).replace(Cy=0.028).to_yaml(path)
