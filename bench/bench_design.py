@@ -27,7 +27,8 @@ GRID = {'prestrain': np.linspace(0.15, 0.40, 5), 'Cy': np.linspace(0.022, 0.030,
         'h3a': np.linspace(-0.0005, 0.0015, 5)}
 PRESSURES = np.linspace(0.0, 400e3, 81)
 #: Targets of the issue [scenes/s] on 2 cores, and per figure [s] with cached kernels.
-TARGETS = {'rows_per_s': 50e3, 'rows_per_s_kx': 5e3, 'figure_s': 5.0}
+TARGETS = {'rows_per_s': 50e3, 'rows_per_s_issue21': 30e3, 'rows_per_s_kx': 5e3,
+           'figure_s': 5.0}
 
 
 def _fresh():
@@ -79,15 +80,13 @@ def loop_of_single_solves(model, kx):
 
 
 class _Stages:
-    """Time spent in the pieces a sweep calls, by wrapping them for one run [s]."""
+    """Wall time of what a sweep calls on its main thread, by wrapping it for one run [s]."""
 
     def __init__(self):
         from fpc_gripper.model import engine, selection
-        self.targets = [(batch, 'finger_model', 'build models (finger_model)'),
-                        (selection.AdaptiveSolver, 'choose_many', 'choose models'),
-                        (engine, 'solve_batch',
-                         'compiled equilibria and circle fits (solve_batch)'),
-                        (engine, 'rigidity_batch', 'compiled K_x (rigidity_batch)')]
+        self.targets = [(batch, 'finger_model', 'main thread: build models (finger_model)'),
+                        (selection.AdaptiveSolver, 'choose_many', 'main thread: choose models'),
+                        (engine, 'rigidity_batch', 'main thread: compiled K_x (rigidity_batch)')]
         self.spent = {}
 
     def _wrap(self, function, label):
@@ -110,18 +109,33 @@ class _Stages:
             setattr(owner, name, function)
 
 
-def breakdown(model, kx):
-    """Where a sweep's time goes, stage by stage [s] (one run, caches cleared)."""
-    _fresh()
-    with _Stages() as stages:
-        t0 = time.perf_counter()
-        sweep(GRID, PRESSURES, model=model, rigidity='x' if kx else False)
-        total = time.perf_counter() - t0
-    out = {k: round(v, 4) for k, v in stages.spent.items()}
-    rest = total - sum(out.values())
-    out['the rest (Python: bookkeeping, results, table)'] = round(rest, 4)
-    out['total'] = round(total, 4)
-    return out
+def breakdown(model, kx, repeats):
+    """
+    Where a sweep's time goes: medians over `repeats` runs, caches cleared [s].
+
+    The grid's compiled batches run on the batch threads while the main thread builds
+    the next models, so their CPU is reported beside the main thread's stages, not in
+    their sum: the main thread's wall by stage, what it spends waiting (wall less its
+    CPU), and the CPU of the other threads (the compiled equilibria and circle fits).
+    """
+    runs = []
+    for _ in range(repeats):
+        _fresh()
+        with _Stages() as stages:
+            t0, c0, m0 = time.perf_counter(), time.process_time(), time.thread_time()
+            sweep(GRID, PRESSURES, model=model, rigidity='x' if kx else False)
+            wall = time.perf_counter() - t0
+            cpu, main = time.process_time() - c0, time.thread_time() - m0
+        run = dict(stages.spent)
+        # The main thread's own time (its CPU) less its stages.
+        run['main thread: the rest (bookkeeping, batches started, results, table)'] = \
+            main - sum(stages.spent.values())
+        run['main thread: waiting for the batch threads'] = wall - main
+        run['total (wall)'] = wall
+        run['batch threads, CPU: compiled equilibria and circle fits'] = cpu - main
+        run['CPU, all threads'] = cpu
+        runs.append(run)
+    return {k: round(statistics.median(run[k] for run in runs), 4) for k in runs[0]}
 
 
 def local_rows(repeats):
@@ -144,7 +158,7 @@ def local_rows(repeats):
                          'speedup': loop_wall / wall, 'cpu_s': cpu[0], 'loop_cpu_s': cpu[1],
                          'ok_rows': int(frame['success'].sum()),
                          'max_rel_deviation_from_loop': deviation,
-                         'breakdown': breakdown(model, kx)}
+                         'breakdown': breakdown(model, kx, repeats)}
             print(f'{key}: {count / wall:.0f} rows/s ({wall:.2f} s, {cpu[0]:.2f} s CPU), loop '
                   f'of single solves {count / loop_wall:.0f} rows/s ({cpu[1]:.2f} s CPU), '
                   f'x{loop_wall / wall:.1f}; {rows[key]["breakdown"]}', flush=True)
@@ -210,6 +224,8 @@ def main(argv=None):
     dask = None if args.skip_dask else dask_rows(args.repeats, local)
     figs = {} if args.skip_figures else figures(args.repeats)
     meets = {'rows_per_s': local['default']['rows_per_s'] >= TARGETS['rows_per_s'],
+             'rows_per_s_issue21': local['default']['rows_per_s']
+             >= TARGETS['rows_per_s_issue21'],
              'rows_per_s_kx': local['default_kx']['rows_per_s'] >= TARGETS['rows_per_s_kx'],
              'figure_s': bool(figs) and all(f['cli_s'] <= TARGETS['figure_s']
                                             for f in figs.values())}
