@@ -200,9 +200,10 @@ def figures(repeats):
             cli = []
             for _ in range(repeats):
                 t0 = time.perf_counter()
+                # --force: each repeat replaces the outputs of the one before.
                 subprocess.run([sys.executable, '-m', 'fpc_gripper.design.cli', 'sweep',
-                                '--figure', str(number), '--out', tmp, '--no-progress'],
-                               check=True, capture_output=True, timeout=600)
+                                '--figure', str(number), '--out', tmp, '--no-progress',
+                                '--force'], check=True, capture_output=True, timeout=600)
                 cli.append(time.perf_counter() - t0)
             warm, _ = _median(lambda: figure(number, tmp), repeats)
             out[str(number)] = {'cli_s': statistics.median(cli), 'in_process_s': warm}
