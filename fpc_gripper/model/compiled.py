@@ -207,25 +207,25 @@ def _adopt_typed_list():
 
 #: Fewest scenes a thread of `over_cores` takes.
 _MIN_CHUNK = 8
-#: The threads of `over_cores`, started once per process (a thread's start costs 0.1-0.4 ms,
-#: as much as a small batch): [executor, its size].
-_POOL = []
+#: The threads of `over_cores`, started once per process and thread count (a thread's start
+#: costs 0.1-0.4 ms, as much as a small batch): size -> executor. One pool per count, so
+#: that batches started without waiting never run on more threads than numba's count.
+_POOLS = {}
 _POOL_LOCK = threading.Lock()
 
 
 def _pool(size):
-    """Return the batches' thread pool, with at least `size` threads."""
+    """Return the batches' thread pool of `size` threads."""
     with _POOL_LOCK:
-        if not _POOL or _POOL[1] < size:
-            if _POOL:
-                _POOL[0].shutdown(wait=False)
-            _POOL[:] = [ThreadPoolExecutor(size, thread_name_prefix='fpc_gripper-batch'), size]
-        return _POOL[0]
+        pool = _POOLS.get(size)
+        if pool is None:
+            pool = _POOLS[size] = ThreadPoolExecutor(size, thread_name_prefix='fpc_gripper-batch')
+        return pool
 
 
 def _forget_pool():
-    # A forked child has none of its parent's threads: it starts a pool of its own.
-    _POOL.clear()
+    # A forked child has none of its parent's threads: it starts pools of its own.
+    _POOLS.clear()
 
 
 os.register_at_fork(after_in_child=_forget_pool)

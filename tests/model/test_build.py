@@ -159,6 +159,33 @@ def test_a_batch_is_the_same_on_one_thread_and_on_every_core():
         assert np.isfinite(one[0]).all()
 
 
+def test_batches_started_without_waiting_keep_to_numbas_thread_count():
+    # over_cores(wait=False) hands its chunks to the pool of numba's thread count: lowered
+    # to one, at most one pool thread runs them (and the waiter the chunks not yet started),
+    # whatever pools earlier batches started.
+    import threading
+    import time
+
+    import numba
+    seen = set()
+
+    def run(lo, hi):
+        seen.add(threading.get_ident())
+        time.sleep(0.005)
+        return np.arange(lo, hi)
+    compiled.over_cores(run, 64)                      # every core's pool, first
+    threads = numba.get_num_threads()
+    numba.set_num_threads(1)
+    try:
+        seen.clear()
+        pending = [compiled.over_cores(run, 64, wait=False) for _ in range(6)]
+        parts = [collect() for collect in pending]
+    finally:
+        numba.set_num_threads(threads)
+    assert all(np.array_equal(part, np.arange(64)) for part in parts)
+    assert len(seen - {threading.get_ident()}) == 1
+
+
 def test_the_build_optimises_exactly_the_functions_it_stores():
     """The workers leave linked-only helpers unoptimised: every stored function is kept."""
     from fpc_gripper.model import build
