@@ -386,6 +386,16 @@ def main(argv=None):
     print(f'wrote {args.output}')
 
 
+def _started(context, executor, namespace):
+    """Return a Driver once the node under `namespace` answers, after a second of warm-up."""
+    driver = Driver(context, namespace)
+    executor.add_node(driver.node)
+    if not driver.wait_for_initial_state():
+        raise RuntimeError(f'the node in {namespace} published no shape')
+    driver.drive(100.0, 1.0, 'distinct')
+    return driver
+
+
 def per_command_main(args):
     """
     Run issue 22's per-command measurement and write its JSON.
@@ -408,24 +418,16 @@ def per_command_main(args):
         # each command raw and publishes fixed shape bytes.
         floor = {}
         process = FloorProcess('/bench_floor')
-        driver = Driver(context, '/bench_floor')
-        executor.add_node(driver.node)
         try:
-            if not driver.wait_for_initial_state():
-                raise RuntimeError('the floor node published nothing')
-            driver.drive(100.0, 1.0, 'distinct')
+            driver = _started(context, executor, '/bench_floor')
             for rate in RATES:
                 floor[rate] = per_command_run(driver, process, rate, args.duration,
                                               args.repeats, 0.0)['cpu_per_command_us']
         finally:
             process.stop()
         model = ModelProcess('/bench_per_command', 1000.0, args.tolerance, args.node_param)
-        driver = Driver(context, '/bench_per_command')
-        executor.add_node(driver.node)
         try:
-            if not driver.wait_for_initial_state():
-                raise RuntimeError('the model node published no initial state')
-            driver.drive(100.0, 1.0, 'distinct')
+            driver = _started(context, executor, '/bench_per_command')
             for rate in RATES:
                 row = per_command_run(driver, model, rate, args.duration, args.repeats, solve)
                 row['floor_us'] = floor[rate]

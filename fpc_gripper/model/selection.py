@@ -19,7 +19,7 @@ from .discretisations.pcc import PCCSolver
 from .discretisations.rod import RodSolver
 from .reference import CONTINUUM_FLOOR, rod_tolerance
 from .section.law import station_layout
-from .section.segments import uniform_edges
+from .section.segments import interval_of, uniform_edges
 from .stiffness import checked_rigidity
 from .validation import check_load, check_pressure_model, real_number
 
@@ -255,30 +255,24 @@ class _Cubic:
         """Return the cubic at `xval`, a float inside the breakpoints."""
         x = self.x
         i = min(max(bisect.bisect_right(x, xval) - 1, 0), len(x) - 2)
-        c0, c1, c2, c3 = self.c[i]
-        s = xval - x[i]
-        res = 0.0 + c3 * 1.0 * 1.0
-        z = s
-        res = res + c2 * z * 1.0
-        z = z * s
-        res = res + c1 * z * 1.0
-        z = z * s
-        return res + c0 * z * 1.0
+        return _horner(*self.c[i], xval - x[i])
 
     def many(self, xvals):
         """Return the cubic at every point of `xvals` (an array inside the breakpoints)."""
-        # The terms of `__call__`, elementwise in the same order: the same bits.
         x = np.asarray(self.x)
-        i = np.clip(np.searchsorted(x, xvals, side='right') - 1, 0, x.size - 2)
-        c0, c1, c2, c3 = np.asarray(self.c)[i].T
-        s = xvals - x[i]
-        res = 0.0 + c3 * 1.0 * 1.0
-        z = s
-        res = res + c2 * z * 1.0
-        z = z * s
-        res = res + c1 * z * 1.0
-        z = z * s
-        return res + c0 * z * 1.0
+        i = interval_of(x, xvals)
+        return _horner(*np.asarray(self.c)[i].T, xvals - x[i])
+
+
+def _horner(c0, c1, c2, c3, s):
+    """Sum a cubic's terms as scipy's `evaluate_poly1` does (floats or arrays: the same bits)."""
+    res = 0.0 + c3 * 1.0 * 1.0
+    z = s
+    res = res + c2 * z * 1.0
+    z = z * s
+    res = res + c1 * z * 1.0
+    z = z * s
+    return res + c0 * z * 1.0
 
 
 class _ArcFeature:

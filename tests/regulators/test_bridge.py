@@ -35,16 +35,6 @@ def values(**changes):
 
 # -- the parameter table ---------------------------------------------------------------------
 
-@pytest.mark.parametrize('row', PARAMETERS, ids=lambda row: row[0])
-def test_every_default_is_inside_its_range(row):
-    name, default, description, extra = row
-    assert description
-    for key in ('floating_point_range', 'integer_range'):
-        if key in extra:
-            low, high = extra[key]
-            assert low <= default <= high, name
-
-
 def test_the_named_groups_are_parameters_of_the_table():
     assert len(DEFAULTS) == len(PARAMETERS)
     assert set(STRUCTURAL) | set(LIMIT_PARAMETERS) <= set(DEFAULTS)
