@@ -6,6 +6,7 @@ from fpc_gripper.control.controller import GoalStatus
 from fpc_gripper.control.controller import Level
 from fpc_gripper.services.logs import bounded
 from fpc_gripper.services.logs import Severity
+from fpc_gripper.services.periods import period_passed
 
 __all__ = ['CONTACTS_PERIOD_S', 'DIAGNOSTICS_PERIOD_S', 'ContactDisplay', 'Status',
            'StatusSchedule', 'contact_states', 'controller_status']
@@ -115,7 +116,7 @@ class StatusSchedule:
             if severity is None and out.status is not GoalStatus.ACTIVE:
                 severity = Severity.INFO
             self._last_key = key
-        due = self._last_time is None or now - self._last_time >= self.period_s
+        due = period_passed(self._last_time, now, self.period_s)
         if changed or due:
             self._last_time = now
         return severity, changed or due
@@ -153,7 +154,7 @@ class ContactDisplay:
 
     def due(self, now):
         """Return whether a display may be sent at `now` [s] (the period has passed)."""
-        return self._last is None or now - self._last >= self.period_s
+        return period_passed(self._last, now, self.period_s)
 
     def show(self, now, states):
         """Return whether to send the display of `states` at `now` [s]; if so, note it sent."""

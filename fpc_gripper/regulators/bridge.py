@@ -13,6 +13,7 @@ from fpc_gripper.regulators.core import RegulatorCore
 from fpc_gripper.regulators.factory import make_backend
 from fpc_gripper.regulators.modbus import RegisterMap
 from fpc_gripper.safe_yaml import ConfigError
+from fpc_gripper.services.periods import period_passed
 
 __all__ = ['RECONNECT_S', 'BridgeSession', 'DiagnosticsSchedule', 'load_bridge_config']
 
@@ -80,8 +81,7 @@ class DiagnosticsSchedule:
 
         """
         levels = [(r.level, r.mode) for r in reports]
-        # A clock that stepped back must not silence the periodic diagnostics.
-        periodic = self._last_time is None or not 0.0 <= now - self._last_time < period_s
+        periodic = period_passed(self._last_time, now, period_s)
         if not (force or periodic or levels != self._last_levels):
             return False
         self._last_time = now

@@ -124,3 +124,16 @@ def test_contacts_are_shown_at_most_once_a_period_and_cleared_once():
     assert display.show(0.15, [None, None, None])
     assert display.shown == [False, False, False]
     assert not display.show(0.3, [None, None, None])
+
+
+def test_a_clock_stepping_back_does_not_silence_the_status_or_the_contacts():
+    # A simulated clock restarted at 0 after 100 s: the periodic status goes on at once.
+    schedule = StatusSchedule(period_s=1.0)
+    assert update(schedule, 100.0) == (None, True)
+    assert update(schedule, 100.5)[1] is False
+    assert update(schedule, 0.2)[1] is True
+    assert update(schedule, 0.7)[1] is False
+    assert update(schedule, 1.2)[1] is True
+    display = ContactDisplay(3, period_s=0.1)
+    assert display.show(50.0, ['a', None, None])
+    assert display.due(0.01)
