@@ -9,6 +9,7 @@ import numpy as np
 
 from fpc_gripper.grasp.finger import FingerGrasp
 from fpc_gripper.grasp.objects import CoaxialCylinder
+from fpc_gripper.services.health import Level
 
 from .geometry import PalmGeometry
 
@@ -49,14 +50,6 @@ class GoalStatus(enum.IntEnum):
     REACHED = 2
     STALLED = 3
     FAULT = 4
-
-
-class Level(enum.IntEnum):
-    """Health, with the values of diagnostic_msgs/DiagnosticStatus."""
-
-    OK = 0
-    WARN = 1
-    ERROR = 2
 
 
 @dataclass(frozen=True)

@@ -1,13 +1,13 @@
 """ROS-free control step of the regulator bridge: supervision, backend I/O and channel health."""
 
 import dataclasses
-import enum
 import math
 
 from fpc_gripper.regulators.base import BackendFault
 from fpc_gripper.regulators.safety import ChannelSupervisor
 from fpc_gripper.regulators.safety import MonotonicTime
 from fpc_gripper.regulators.safety import SupervisorMode
+from fpc_gripper.services.health import Level
 from fpc_gripper.services.input_limits import check_absolute_pressure
 from fpc_gripper.services.input_limits import check_frame
 from fpc_gripper.services.input_limits import checked_bounds
@@ -20,14 +20,6 @@ __all__ = ['ChannelReport', 'Level', 'MonitorSettings', 'RegulatorCore', 'Sample
            'check_readback']
 
 _WATCHDOG_WORDS = {SupervisorMode.IDLE: 'waiting', SupervisorMode.WATCHDOG: 'expired'}
-
-
-class Level(enum.IntEnum):
-    """Health of a channel; the values are those of diagnostic_msgs/DiagnosticStatus."""
-
-    OK = 0
-    WARN = 1
-    ERROR = 2
 
 
 @dataclasses.dataclass(frozen=True)

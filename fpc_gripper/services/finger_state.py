@@ -1,11 +1,11 @@
 """ROS-free inputs of one finger of the model service: their checks, state and status."""
 
 import dataclasses
-import enum
 import math
 
 import numpy as np
 
+from fpc_gripper.services.health import Level
 from fpc_gripper.services.input_limits import check_absolute_pressure
 from fpc_gripper.services.input_limits import check_frame
 from fpc_gripper.services.input_limits import check_stamp
@@ -20,14 +20,6 @@ __all__ = ['FingerState', 'FingerStatus', 'Level', 'RATE_BURST', 'Update', 'chec
 #: Capacity of each finger's solve-rate token bucket: sustained rate <= max_rate_hz, bursts
 #: of at most this many back-to-back solves [solves].
 RATE_BURST = 2.0
-
-
-class Level(enum.IntEnum):
-    """Health of one finger; the values are those of diagnostic_msgs/DiagnosticStatus."""
-
-    OK = 0
-    WARN = 1
-    ERROR = 2
 
 
 def _in_order(value, stamp, *checks):
