@@ -5,7 +5,7 @@ from fpc_gripper.control.controller import GripperControlLaw
 from fpc_gripper.control.controller import SAFE_STATES
 from fpc_gripper.control.geometry import PalmGeometry
 from fpc_gripper.control.inverse import InverseModel
-from fpc_gripper.grasp.finger import FingerGrasp
+from fpc_gripper.grasp.finger import finger_grasps
 from fpc_gripper.grasp.objects import make_object
 from fpc_gripper.grasp.objects import OBJECTS
 from fpc_gripper.model import PRESSURE_MODEL_NAMES
@@ -171,5 +171,4 @@ def _grasps(config, settings, values):
         raise ValueError(f"`object` must be 'unknown' or one of {list(OBJECTS)}, got "
                          f'{kind!r}')
     obj = make_object(kind, values['object_diameter'], values['object_height'])
-    return [FingerGrasp(f.design, obj.section(f.mount_angle, config.palm_radius),
-                        config.max_pressure, settings) for f in config.fingers]
+    return finger_grasps(obj, config, settings)

@@ -5,7 +5,7 @@ import math
 
 import numpy as np
 
-from fpc_gripper.grasp.finger import FingerGrasp
+from fpc_gripper.grasp.finger import finger_grasps
 from fpc_gripper.grasp.grasp import GraspSettings, simulate_grasp
 from fpc_gripper.model.contact import ContactSettings
 from fpc_gripper.model.pipeline import ModelSettings
@@ -79,10 +79,7 @@ class VirtualObject:
         self.obj = obj
         self.config = config
         self.settings = settings
-        contact = ContactSettings(penalty=penalty)
-        self.fingers = tuple(
-            FingerGrasp(f.design, obj.section(f.mount_angle, config.palm_radius),
-                        config.max_pressure, settings, contact) for f in config.fingers)
+        self.fingers = finger_grasps(obj, config, settings, ContactSettings(penalty=penalty))
 
     @property
     def touch_pressure(self):

@@ -8,7 +8,7 @@ from fpc_gripper.model.contact import ContactSettings, point_gaps, solve_contact
 from fpc_gripper.model.pipeline import contact_model, ModelSettings
 from fpc_gripper.model.validation import real_number
 
-__all__ = ['FingerGrasp']
+__all__ = ['FingerGrasp', 'finger_grasps']
 
 #: Pressure tolerance of the root finds [Pa].
 _XTOL = 1.0e-3
@@ -135,3 +135,25 @@ class FingerGrasp:
                        self.max_pressure - _H_PRESSURE)
         return (self.normal_force(pressure + _H_PRESSURE)
                 - self.normal_force(pressure - _H_PRESSURE)) / (2.0 * _H_PRESSURE)
+
+
+def finger_grasps(obj, config, settings=ModelSettings(), contact=ContactSettings()):
+    """
+    Return every finger's `FingerGrasp` of an object, where a gripper config mounts it.
+
+    Parameters
+    ----------
+    obj : grasp object (`grasp.objects`)
+    config : GripperConfig
+        Its fingers' designs and mount angles, ``palm_radius`` and ``max_pressure``.
+    settings : ModelSettings
+    contact : ContactSettings
+
+    Returns
+    -------
+    tuple of FingerGrasp
+        In the config's finger order.
+
+    """
+    return tuple(FingerGrasp(f.design, obj.section(f.mount_angle, config.palm_radius),
+                             config.max_pressure, settings, contact) for f in config.fingers)
