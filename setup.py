@@ -37,7 +37,7 @@ setup(
     name=package_name,
     version='0.1.0',
     packages=find_packages(exclude=['tests', 'tests.*', 'bench']),
-    package_data={'fpc_gripper': ['data/*.json', 'model/compiled/*']},
+    package_data={'fpc_gripper': ['data/*.json', 'data/*.xml', 'model/compiled/*']},
     cmdclass={'build_py': BuildWithEngine},
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),

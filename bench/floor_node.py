@@ -17,12 +17,14 @@ from sensor_msgs.msg import FluidPressure
 from fpc_gripper.io.messages import serialized_shape, STATE_QOS
 from fpc_gripper.model import ActuatorDesign
 from fpc_gripper.model.pipeline import finger_model
+from fpc_gripper.nodes.middleware import apply_middleware_settings
 from fpc_gripper.nodes.model_node import _COMMAND_QOS
 
 FINGERS = 3
 
 
 def main(namespace):
+    apply_middleware_settings()
     rclpy.init(args=[], signal_handler_options=SignalHandlerOptions.NO)
     node = Node('floor_node', namespace=namespace)
     shape = bytearray(serialized_shape(finger_model(ActuatorDesign()).solve(1e5),

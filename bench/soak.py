@@ -77,6 +77,7 @@ from timing import machine  # noqa: E402
 
 from fpc_gripper.io.config import default_gripper_config_path  # noqa: E402
 from fpc_gripper.io.config import load_gripper_config  # noqa: E402
+from fpc_gripper.nodes.middleware import apply_middleware_settings  # noqa: E402
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 BENCH = ROOT / 'bench'
@@ -1086,6 +1087,9 @@ class Soak:
         self.start_nodes()
         # rclpy's handlers would shut the context down under the probe: a signal only asks
         # the run to end, and the nodes are then stopped in order.
+        # The probe's readers take the same large faulty payloads as the nodes: the same
+        # memory settings (FPC_GRIPPER_MIDDLEWARE_SETTINGS=0 turns them off for all).
+        apply_middleware_settings()
         rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
         for sig in (signal.SIGINT, signal.SIGTERM):
             signal.signal(sig, lambda *_: self.stop_event.set())

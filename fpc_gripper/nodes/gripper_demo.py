@@ -27,6 +27,7 @@ from fpc_gripper.io.session_chart import make_chart
 from fpc_gripper.io.session_chart import message_count
 from fpc_gripper.nodes.gripper import bridge_exit_code
 from fpc_gripper.nodes.gripper import compose
+from fpc_gripper.nodes.middleware import apply_middleware_settings
 from fpc_gripper.nodes.runner import make_executor
 from fpc_gripper.nodes.runner import own_arguments
 from fpc_gripper.nodes.runner import SPIN_TIMEOUT_S
@@ -215,6 +216,7 @@ def main(args=None):
     parser.add_argument('--hold', type=float, default=3.0, help='hold duration [s]')
     parser.add_argument('--gripper-config', default=None, help='gripper YAML')
     options = parser.parse_args(argv[1:])
+    apply_middleware_settings()
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     phases, info = [], None
     try:

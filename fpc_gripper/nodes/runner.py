@@ -17,6 +17,7 @@ from rclpy.logging import get_logger
 from rclpy.signals import SignalHandlerOptions
 from rclpy.utilities import remove_ros_args
 
+from fpc_gripper.nodes.middleware import apply_middleware_settings
 from fpc_gripper.safe_yaml import ConfigError
 
 __all__ = ['EXECUTOR_ENV', 'FORCE_AFTER_S', 'START_ERRORS', 'StopRequest', 'make_executor',
@@ -215,6 +216,7 @@ def run_node(build, name, args=None, check=None):
     nodes = ()
     try:
         try:
+            apply_middleware_settings()
             rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
             built = build()
             nodes = tuple(built) if isinstance(built, (list, tuple)) else (built,)

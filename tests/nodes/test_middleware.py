@@ -1,0 +1,136 @@
+"""The Fast DDS profile and allocator setting: when they apply, and that they free memory."""
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+
+import pytest
+
+from fpc_gripper.nodes.middleware import (middleware_settings, MMAP_THRESHOLD_BYTES,
+                                          OPT_OUT_ENV, PROFILE)
+
+PROFILE_ENV = {'FASTRTPS_DEFAULT_PROFILES_FILE': str(PROFILE),
+               'RMW_FASTRTPS_USE_QOS_FROM_XML': '1'}
+
+
+@pytest.mark.parametrize('environ, env, threshold', [
+    ({}, PROFILE_ENV, MMAP_THRESHOLD_BYTES),
+    ({'RMW_IMPLEMENTATION': 'rmw_fastrtps_cpp'}, PROFILE_ENV, MMAP_THRESHOLD_BYTES),
+    ({'RMW_IMPLEMENTATION': 'rmw_cyclonedds_cpp'}, {}, MMAP_THRESHOLD_BYTES),
+    ({'FASTRTPS_DEFAULT_PROFILES_FILE': '/etc/mine.xml'}, {}, MMAP_THRESHOLD_BYTES),
+    ({'RMW_FASTRTPS_USE_QOS_FROM_XML': '0'}, {}, MMAP_THRESHOLD_BYTES),
+    ({'RMW_FASTRTPS_PUBLICATION_MODE': 'ASYNCHRONOUS'}, {}, MMAP_THRESHOLD_BYTES),
+    ({'MALLOC_MMAP_THRESHOLD_': '65536'}, PROFILE_ENV, None),
+    ({OPT_OUT_ENV: '0'}, {}, None),
+])
+def test_settings_apply_only_where_nobody_else_chose(environ, env, threshold):
+    assert middleware_settings(environ) == (env, threshold)
+
+
+# A reliable keep-all reader that lets 12 messages of 1 MB queue before it takes any, then
+# takes them all: glibc's bytes in use (mallinfo2) before the burst, after it is taken, and
+# what the depth-1 reader of a 5-message burst received (the ROS QoS must still hold).
+_PROBE = r"""
+import ctypes, json, sys, time
+import rclpy
+from rclpy.duration import Duration
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from std_msgs.msg import String
+from fpc_gripper.nodes.middleware import apply_middleware_settings
+
+class Info(ctypes.Structure):
+    _fields_ = [(name, ctypes.c_size_t) for name in (
+        'arena', 'ordblks', 'smblks', 'hblks', 'hblkhd', 'usmblks', 'fsmblks', 'uordblks',
+        'fordblks', 'keepcost')]
+
+libc = ctypes.CDLL(None)
+libc.mallinfo2.restype = Info
+apply_middleware_settings()
+rclpy.init()
+node = rclpy.create_node('middleware_probe')
+executor = SingleThreadedExecutor()
+executor.add_node(node)
+reliable = dict(reliability=ReliabilityPolicy.RELIABLE)
+taken, latest = [], []
+big_sub = node.create_subscription(String, 'big', lambda m: taken.append(len(m.data)),
+                                   QoSProfile(depth=0, history=HistoryPolicy.KEEP_ALL, **reliable))
+small_sub = node.create_subscription(String, 'small', lambda m: latest.append(m.data),
+                                     QoSProfile(depth=1, **reliable))
+big = node.create_publisher(String, 'big',
+                            QoSProfile(depth=0, history=HistoryPolicy.KEEP_ALL, **reliable))
+small = node.create_publisher(String, 'small', QoSProfile(depth=10, **reliable))
+deadline = time.monotonic() + 30
+while (big.get_subscription_count() < 1 or small.get_subscription_count() < 1) \
+        and time.monotonic() < deadline:
+    executor.spin_once(timeout_sec=0.05)
+for _ in range(3):
+    executor.spin_once(timeout_sec=0.01)
+def rss():
+    with open('/proc/self/statm') as statm:
+        return int(statm.read().split()[1]) * 4096
+
+before, rss_before = libc.mallinfo2().uordblks, rss()
+for i in range(12):
+    big.publish(String(data=chr(97 + i) * 1_000_000))
+for i in range(5):
+    small.publish(String(data=str(i)))
+acked = big.wait_for_all_acked(Duration(seconds=30)) and \
+    small.wait_for_all_acked(Duration(seconds=30))
+while (len(taken) < 12 or not latest) and time.monotonic() < deadline + 30:
+    executor.spin_once(timeout_sec=0.05)
+for _ in range(3):
+    executor.spin_once(timeout_sec=0.01)
+after, rss_after = libc.mallinfo2().uordblks, rss()
+print(json.dumps({'acked': acked, 'taken': taken, 'latest': latest,
+                  'kept_mib': (after - before) / 2 ** 20,
+                  'rss_kept_mib': (rss_after - rss_before) / 2 ** 20}))
+"""
+
+
+def _probe(**env):
+    environ = {k: v for k, v in os.environ.items()
+               if k not in ('FASTRTPS_DEFAULT_PROFILES_FILE', 'RMW_FASTRTPS_USE_QOS_FROM_XML',
+                            'MALLOC_MMAP_THRESHOLD_', OPT_OUT_ENV)}
+    environ.update(env)
+    done = subprocess.run([sys.executable, '-c', _PROBE], env=environ, capture_output=True,
+                          text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    # Fast DDS prints its log (an XML parse error among it) on stdout
+    return json.loads(done.stdout.strip().splitlines()[-1]), done.stdout + done.stderr
+
+
+@pytest.mark.skipif(not hasattr(__import__('ctypes').CDLL(None), 'mallinfo2'),
+                    reason='needs glibc 2.33 or later (mallinfo2)')
+def test_profile_and_threshold_give_a_drained_backlog_back():
+    ours, ours_log = _probe()
+    rmw_defaults, _ = _probe(**{OPT_OUT_ENV: '0'})
+    # the profile alone (given as a user's own), glibc's sliding mmap threshold left as is
+    profile_only, _ = _probe(**{OPT_OUT_ENV: '0'}, **PROFILE_ENV)
+    for result in (ours, rmw_defaults, profile_only):
+        assert result['acked']
+        assert result['taken'] == [1_000_000] * 12
+        # depth 1, reliable: of a burst of five the reader keeps the last, as ROS asked
+        assert result['latest'] == ['4']
+    assert 'XMLPARSER' not in ours_log and 'Error' not in ours_log
+    # rmw's own settings keep the reader's 12 buffers of 1 MB after the backlog is taken
+    assert rmw_defaults['kept_mib'] > 10.0 and rmw_defaults['rss_kept_mib'] > 10.0
+    # the profile frees them, but glibc keeps their pages: above its raised threshold
+    # they came from the heap
+    assert profile_only['kept_mib'] < 1.0 and profile_only['rss_kept_mib'] > 4.0
+    # both settings: the bytes and the pages are given back
+    assert ours['kept_mib'] < 1.0 and ours['rss_kept_mib'] < 2.0
+
+
+def test_a_broken_profile_is_reported_by_fast_dds(tmp_path):
+    # The check above that Fast DDS printed no parse error can fail: a profile it cannot
+    # read is reported on stderr, and the process still runs on rmw's defaults.
+    broken = tmp_path / 'broken.xml'
+    shutil.copy(PROFILE, broken)
+    broken.write_text(broken.read_text().replace('>DYNAMIC<', '>DYNAMIC_SOMETIMES<'))
+    result, log = _probe(FASTRTPS_DEFAULT_PROFILES_FILE=str(broken),
+                         RMW_FASTRTPS_USE_QOS_FROM_XML='1')
+    assert 'XMLPARSER' in log
+    assert result['latest'] == ['4']
