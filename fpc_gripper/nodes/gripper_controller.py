@@ -65,12 +65,12 @@ from fpc_gripper.io.contact_markers import contact_marker
 from fpc_gripper.io.messages import STATE_QOS
 from fpc_gripper.nodes.gripper_action import GripperCommandServer
 from fpc_gripper.nodes.guard import InputGuard
-from fpc_gripper.nodes.parameters import BOUND_NAMES
 from fpc_gripper.nodes.parameters import declare_table
-from fpc_gripper.nodes.parameters import input_bound_table
 from fpc_gripper.nodes.parameters import input_bounds
 from fpc_gripper.nodes.runner import run_node
+from fpc_gripper.services.input_limits import BOUND_NAMES
 from fpc_gripper.services.input_limits import checked_bounds
+from fpc_gripper.services.input_limits import input_bound_table
 from fpc_gripper.services.logs import NodeLog
 
 __all__ = ['GripperController', 'main']

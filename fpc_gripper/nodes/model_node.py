@@ -7,6 +7,7 @@ import threading
 import time
 
 from geometry_msgs.msg import WrenchStamped
+from rcl_interfaces.msg import SetParametersResult
 from rclpy.clock import Clock
 from rclpy.clock import ClockType
 from rclpy.node import Node
@@ -16,21 +17,23 @@ from rclpy.qos import QoSProfile
 from rclpy.qos import ReliabilityPolicy
 from sensor_msgs.msg import FluidPressure
 
+from fpc_gripper.io.config import default_gripper_config_path
 from fpc_gripper.io.config import load_gripper_config
 from fpc_gripper.io.messages import FingerPlacement
 from fpc_gripper.model.pipeline import finger_model
 from fpc_gripper.model.pipeline import ModelSettings
 from fpc_gripper.nodes.guard import InputGuard
 from fpc_gripper.nodes.model_outputs import ModelOutputs
-from fpc_gripper.nodes.model_parameters import check_parameters
-from fpc_gripper.nodes.model_parameters import parameter_table
-from fpc_gripper.nodes.model_parameters import SOLVER_PARAMETERS
-from fpc_gripper.nodes.parameters import BOUND_NAMES
 from fpc_gripper.nodes.parameters import declare_table
 from fpc_gripper.nodes.parameters import input_bounds
 from fpc_gripper.nodes.runner import run_node
+from fpc_gripper.services.input_limits import BOUND_NAMES
+from fpc_gripper.services.input_limits import checked_bounds
 from fpc_gripper.services.logs import NodeLog
 from fpc_gripper.services.model_core import ModelCore
+from fpc_gripper.services.model_parameters import parameter_table
+from fpc_gripper.services.model_parameters import refusal
+from fpc_gripper.services.model_parameters import SOLVER_PARAMETERS
 
 _COMMAND_QOS = QoSProfile(depth=10, history=HistoryPolicy.KEEP_LAST,
                           reliability=ReliabilityPolicy.RELIABLE)
@@ -99,10 +102,10 @@ class ModelNode(Node):
             raise
 
     def _set_up(self, solver_factory):
-        declare_table(self, parameter_table())
+        table = parameter_table(str(default_gripper_config_path()))
+        declare_table(self, table)
         # Overrides bypass the on-set callback: check the starting values the same way.
-        result = self._validate_parameters([self.get_parameter(n)
-                                            for n, *_ in parameter_table()])
+        result = self._validate_parameters([self.get_parameter(n) for n, *_ in table])
         if not result.successful:
             raise ValueError(result.reason)
         self._solver_factory = solver_factory or finger_model
@@ -230,7 +233,17 @@ class ModelNode(Node):
     # -- parameters -------------------------------------------------------------------------
 
     def _validate_parameters(self, parameters):
-        return check_parameters(self, parameters, getattr(self, '_frames', ()))
+        for param in parameters:
+            reason = refusal(param.name, param.value)
+            if reason is not None:
+                return SetParametersResult(successful=False, reason=reason)
+        bounds = {p.name: p.value for p in parameters if p.name in BOUND_NAMES}
+        if bounds:
+            try:
+                checked_bounds(input_bounds(self, bounds), getattr(self, '_frames', ()))
+            except (TypeError, ValueError) as exc:
+                return SetParametersResult(successful=False, reason=str(exc))
+        return SetParametersResult(successful=True)
 
     def _apply_parameters(self, parameters):
         values = {p.name: p.value for p in parameters}

@@ -18,7 +18,6 @@ from sensor_msgs.msg import FluidPressure
 from fpc_gripper.nodes.guard import InputGuard
 from fpc_gripper.nodes.lifecycle import SelfActivatingNode
 from fpc_gripper.nodes.parameters import declare_table
-from fpc_gripper.nodes.parameters import input_bound_table
 from fpc_gripper.nodes.parameters import input_bounds
 from fpc_gripper.nodes.runner import run_node
 from fpc_gripper.regulators.base import BackendFault
@@ -29,6 +28,7 @@ from fpc_gripper.regulators.bridge_parameters import PARAMETERS
 from fpc_gripper.regulators.bridge_parameters import refusal
 from fpc_gripper.regulators.core import Level
 from fpc_gripper.safe_yaml import ConfigError
+from fpc_gripper.services.input_limits import input_bound_table
 from fpc_gripper.services.logs import NodeLog
 from fpc_gripper.services.logs import Severity
 

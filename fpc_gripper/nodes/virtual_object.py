@@ -7,7 +7,6 @@ import sys
 
 from geometry_msgs.msg import WrenchStamped
 from nav_msgs.msg import Path
-from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
 from rclpy.qos import HistoryPolicy
 from rclpy.qos import qos_profile_sensor_data
@@ -16,12 +15,12 @@ from rclpy.qos import ReliabilityPolicy
 from sensor_msgs.msg import FluidPressure
 
 from fpc_gripper.control.virtual_object import VirtualObject
+from fpc_gripper.control.virtual_object_parameters import METHODS
+from fpc_gripper.control.virtual_object_parameters import PARAMETERS
 from fpc_gripper.grasp.objects import make_object
-from fpc_gripper.grasp.objects import OBJECTS
-from fpc_gripper.io.config import default_gripper_config_path
 from fpc_gripper.io.config import load_gripper_config
 from fpc_gripper.nodes.guard import InputGuard
-from fpc_gripper.nodes.parameters import float_range
+from fpc_gripper.nodes.parameters import declare_table
 from fpc_gripper.nodes.runner import run_node
 from fpc_gripper.services.sample_ring import SampleRing
 
@@ -60,32 +59,12 @@ class VirtualObjectNode(Node):
 
     def __init__(self, node_name='virtual_object', **kwargs):
         super().__init__(node_name, **kwargs)
-        positive = float_range(1e-3, 0.5)
-        self.declare_parameter('gripper_config', str(default_gripper_config_path()),
-                               ParameterDescriptor(description='Gripper YAML.', read_only=True))
-        self.declare_parameter('object', 'cylinder', ParameterDescriptor(
-            description='cylinder (coaxial with the palm axis), sphere (centred on it) or box '
-                        '(D x D section, across the palm).', read_only=True,
-            additional_constraints=f'one of {list(OBJECTS)}'))
-        self.declare_parameter('object_diameter', 0.040, ParameterDescriptor(
-            description='Object size D [m].', read_only=True, floating_point_range=positive))
-        self.declare_parameter('object_height', 0.0, ParameterDescriptor(
-            description="Height of the object's lowest point above the palm [m].",
-            read_only=True, floating_point_range=float_range(0.0, 0.5)))
-        self.declare_parameter('method', 'exact', ParameterDescriptor(
-            description="'exact' (rigid) or 'penalty' (compliant, stiffness_n_m).",
-            read_only=True, additional_constraints="one of ['exact', 'penalty']"))
-        self.declare_parameter('stiffness_n_m', 200.0, ParameterDescriptor(
-            description='Surface stiffness of the penalty method [N/m].', read_only=True,
-            floating_point_range=float_range(1.0, 1e6)))
-        self.declare_parameter('atmospheric_pressure', 101325.0, ParameterDescriptor(
-            description='[Pa]: gauge = absolute - atmospheric_pressure.',
-            floating_point_range=float_range(3e4, 1.2e5)))
+        declare_table(self, PARAMETERS)
         param = self.get_parameter
         config = load_gripper_config(param('gripper_config').value)
         method = param('method').value
-        if method not in ('exact', 'penalty'):
-            raise ValueError(f"`method` must be 'exact' or 'penalty', got {method!r}")
+        if method not in METHODS:
+            raise ValueError(f'`method` must be one of {list(METHODS)}, got {method!r}')
         self._names = config.names
         self._palm_radius = config.palm_radius
         self.object = make_object(param('object').value, param('object_diameter').value,

@@ -12,9 +12,10 @@ from fpc_gripper.model.validation import InputLimits
 from fpc_gripper.model.validation import integer
 from fpc_gripper.services.logs import bounded
 
-__all__ = ['DEFAULT_BOUNDS', 'InputBounds', 'InputCheck', 'MAX_STAMP_NS', 'MAX_STAMP_SEC',
-           'Rejection', 'check_absolute_pressure', 'check_frame', 'check_stamp',
-           'check_tip_force_value', 'checked_bounds', 'real_or_none', 'stale_detail']
+__all__ = ['BOUND_NAMES', 'DEFAULT_BOUNDS', 'InputBounds', 'InputCheck', 'MAX_STAMP_NS',
+           'MAX_STAMP_SEC', 'Rejection', 'check_absolute_pressure', 'check_frame',
+           'check_stamp', 'check_tip_force_value', 'checked_bounds', 'input_bound_table',
+           'real_or_none', 'stale_detail']
 
 #: Largest ``builtin_interfaces/Time.sec`` (an int32) [s].
 MAX_STAMP_SEC = 2 ** 31 - 1
@@ -143,6 +144,36 @@ class InputBounds:
 
 #: The bounds the nodes start with.
 DEFAULT_BOUNDS = InputBounds()
+#: The node parameters named as the `InputBounds` fields.
+BOUND_NAMES = tuple(f.name for f in dataclasses.fields(InputBounds))
+
+
+def input_bound_table(names=BOUND_NAMES):
+    """
+    Return the parameter-table rows of the input bounds in `names`, ranges as pairs.
+
+    Every node that takes a bound declares it with the same description and range.
+    """
+    rows = {
+        'min_absolute_pressure': (
+            DEFAULT_BOUNDS.min_absolute_pressure,
+            'Pressures below this absolute value are rejected [Pa]: vacuum, or a message '
+            'whose pressure was never set (a default FluidPressure reads 0 Pa).',
+            {'floating_point_range': (0.0, 3.0e4)}),
+        'max_tip_force': (
+            DEFAULT_BOUNDS.max_tip_force,
+            'Tip forces of a larger magnitude are rejected [N]; at most the model envelope, '
+            '5 N.', {'floating_point_range': (1.0e-3, DEFAULT_BOUNDS.max_tip_force)}),
+        'max_frame_id_length': (
+            DEFAULT_BOUNDS.max_frame_id_length,
+            'Inputs whose header frame_id is longer are rejected [characters]; at least the '
+            'longest finger frame.', {'integer_range': (1, 65536)}),
+        'max_payload_bytes': (
+            DEFAULT_BOUNDS.max_payload_bytes,
+            'Input messages whose serialized size is larger are rejected undecoded [bytes].',
+            {'integer_range': (64, 1 << 24)}),
+    }
+    return tuple((name, *rows[name]) for name in names)
 
 
 def checked_bounds(bounds, frames=()):
