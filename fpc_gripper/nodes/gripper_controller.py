@@ -40,7 +40,6 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from diagnostic_msgs.msg import KeyValue
 from geometry_msgs.msg import WrenchStamped
 from rcl_interfaces.msg import ParameterDescriptor
-from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from rclpy.qos import HistoryPolicy
 from rclpy.qos import qos_profile_sensor_data
@@ -65,11 +64,11 @@ from fpc_gripper.io.contact_markers import contact_marker
 from fpc_gripper.io.messages import STATE_QOS
 from fpc_gripper.nodes.gripper_action import GripperCommandServer
 from fpc_gripper.nodes.guard import InputGuard
+from fpc_gripper.nodes.parameters import check_change
 from fpc_gripper.nodes.parameters import declare_table
 from fpc_gripper.nodes.parameters import input_bounds
 from fpc_gripper.nodes.runner import run_node
 from fpc_gripper.services.input_limits import BOUND_NAMES
-from fpc_gripper.services.input_limits import checked_bounds
 from fpc_gripper.services.input_limits import input_bound_table
 from fpc_gripper.services.logs import NodeLog
 
@@ -208,13 +207,11 @@ class GripperController(Node):
         return law_config(values, self._gripper.max_pressure)
 
     def _validate_parameters(self, parameters):
-        changes = {p.name: p.value for p in parameters}
-        try:
-            checked_bounds(input_bounds(self, changes), getattr(self, '_frames', ()))
-            self._law_config(changes)
-        except (TypeError, ValueError) as exc:
-            return SetParametersResult(successful=False, reason=str(exc))
-        return SetParametersResult(successful=True)
+        return check_change(self, parameters, self._law_refusal, getattr(self, '_frames', ()))
+
+    def _law_refusal(self, changes):
+        # the law's config raises a ValueError that names what it cannot take
+        self._law_config(changes)
 
     def _apply_parameters(self, parameters):
         names = {p.name for p in parameters}

@@ -7,7 +7,6 @@ import threading
 import time
 
 from geometry_msgs.msg import WrenchStamped
-from rcl_interfaces.msg import SetParametersResult
 from rclpy.clock import Clock
 from rclpy.clock import ClockType
 from rclpy.node import Node
@@ -24,11 +23,11 @@ from fpc_gripper.model.pipeline import finger_model
 from fpc_gripper.model.pipeline import ModelSettings
 from fpc_gripper.nodes.guard import InputGuard
 from fpc_gripper.nodes.model_outputs import ModelOutputs
+from fpc_gripper.nodes.parameters import check_change
 from fpc_gripper.nodes.parameters import declare_table
 from fpc_gripper.nodes.parameters import input_bounds
 from fpc_gripper.nodes.runner import run_node
 from fpc_gripper.services.input_limits import BOUND_NAMES
-from fpc_gripper.services.input_limits import checked_bounds
 from fpc_gripper.services.logs import NodeLog
 from fpc_gripper.services.model_core import ModelCore
 from fpc_gripper.services.model_parameters import parameter_table
@@ -233,17 +232,7 @@ class ModelNode(Node):
     # -- parameters -------------------------------------------------------------------------
 
     def _validate_parameters(self, parameters):
-        for param in parameters:
-            reason = refusal(param.name, param.value)
-            if reason is not None:
-                return SetParametersResult(successful=False, reason=reason)
-        bounds = {p.name: p.value for p in parameters if p.name in BOUND_NAMES}
-        if bounds:
-            try:
-                checked_bounds(input_bounds(self, bounds), getattr(self, '_frames', ()))
-            except (TypeError, ValueError) as exc:
-                return SetParametersResult(successful=False, reason=str(exc))
-        return SetParametersResult(successful=True)
+        return check_change(self, parameters, refusal, getattr(self, '_frames', ()))
 
     def _apply_parameters(self, parameters):
         values = {p.name: p.value for p in parameters}

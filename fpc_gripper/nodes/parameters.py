@@ -1,11 +1,13 @@
 """Parameter declaration shared by the nodes: ROS-free tables declared with their ranges."""
 
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rcl_interfaces.msg import SetParametersResult
 
 from fpc_gripper.services.input_limits import BOUND_NAMES
+from fpc_gripper.services.input_limits import checked_bounds
 from fpc_gripper.services.input_limits import InputBounds
 
-__all__ = ['declare_table', 'input_bounds']
+__all__ = ['check_change', 'declare_table', 'input_bounds']
 
 
 def _float_range(low, high):
@@ -59,3 +61,32 @@ def input_bounds(node, overrides=None):
               if node.has_parameter(name)}
     values.update({k: v for k, v in (overrides or {}).items() if k in BOUND_NAMES})
     return InputBounds(**values)
+
+
+def check_change(node, parameters, refusal=None, frames=None):
+    """
+    Return the SetParametersResult of a parameter change: the node's refusal, then the bounds.
+
+    Parameters
+    ----------
+    node : rclpy.node.Node
+        Holds the current values of the parameters not changed.
+    parameters : list of rclpy.parameter.Parameter
+        The change.
+    refusal : callable, optional
+        ``refusal(changes)``, the changed values by name: why the node refuses them (a
+        str), or None; a ValueError or TypeError it raises refuses with its message.
+    frames : tuple of str, optional
+        The finger frames, which the input bounds must admit (`checked_bounds`).
+
+    """
+    changes = {p.name: p.value for p in parameters}
+    try:
+        reason = None if refusal is None else refusal(changes)
+        if reason is None:
+            bounds = input_bounds(node, changes)
+            if frames is not None:
+                checked_bounds(bounds, frames)
+    except (TypeError, ValueError) as exc:
+        reason = str(exc)
+    return SetParametersResult(successful=reason is None, reason=reason or '')

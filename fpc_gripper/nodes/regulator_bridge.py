@@ -6,7 +6,6 @@ import sys
 from diagnostic_msgs.msg import DiagnosticArray
 from diagnostic_msgs.msg import DiagnosticStatus
 from diagnostic_msgs.msg import KeyValue
-from rcl_interfaces.msg import SetParametersResult
 from rclpy.lifecycle import TransitionCallbackReturn
 from rclpy.qos import HistoryPolicy
 from rclpy.qos import qos_profile_sensor_data
@@ -17,6 +16,7 @@ from sensor_msgs.msg import FluidPressure
 
 from fpc_gripper.nodes.guard import InputGuard
 from fpc_gripper.nodes.lifecycle import SelfActivatingNode
+from fpc_gripper.nodes.parameters import check_change
 from fpc_gripper.nodes.parameters import declare_table
 from fpc_gripper.nodes.parameters import input_bounds
 from fpc_gripper.nodes.runner import run_node
@@ -185,16 +185,12 @@ class RegulatorBridge(SelfActivatingNode):
     # -- parameters -------------------------------------------------------------------------
 
     def _validate_parameters(self, parameters):
-        try:
-            input_bounds(self, {p.name: p.value for p in parameters})
-        except (TypeError, ValueError) as exc:
-            return SetParametersResult(successful=False, reason=str(exc))
-        for param in parameters:
-            reason = refusal(param.name, param.value, configured=self._configured,
-                             state=self.lifecycle_state, backend_kind=self._session.kind)
-            if reason is not None:
-                return SetParametersResult(successful=False, reason=reason)
-        return SetParametersResult(successful=True)
+        return check_change(self, parameters, self._refusal)
+
+    def _refusal(self, changes):
+        return next(filter(None, (
+            refusal(name, value, configured=self._configured, state=self.lifecycle_state,
+                    backend_kind=self._session.kind) for name, value in changes.items())), None)
 
     def _apply_parameters(self, parameters):
         names = {p.name for p in parameters}

@@ -79,14 +79,21 @@ def parameter_table(gripper_config):
     )
 
 
-def refusal(name, value):
+def refusal(changes):
     """
-    Return why the model node refuses to set a parameter, or None when it accepts it.
+    Return why the model node refuses a change of parameters, or None when it accepts it.
 
-    The choices and finite floats; the input bounds are checked together, by the node.
+    The choices and finite floats, by name; the node checks the input bounds after.
+
+    Parameters
+    ----------
+    changes : mapping
+        The changed values by name.
+
     """
-    if name in _CHOICES and value not in _CHOICES[name]:
-        return f'`{name}` must be one of {list(_CHOICES[name])}, got {value!r}'
-    if isinstance(value, float) and not math.isfinite(value):
-        return f'`{name}` must be finite, got {value}'
+    for name, value in changes.items():
+        if name in _CHOICES and value not in _CHOICES[name]:
+            return f'`{name}` must be one of {list(_CHOICES[name])}, got {value!r}'
+        if isinstance(value, float) and not math.isfinite(value):
+            return f'`{name}` must be finite, got {value}'
     return None
