@@ -106,6 +106,15 @@ def test_the_install_carries_its_compiled_engine(prefix):
     assert pathlib.Path(directory) == build
 
 
+def test_the_install_carries_its_fast_dds_profile(prefix):
+    """Every node process points Fast DDS at the profile inside the installed package."""
+    probe = 'from fpc_gripper.nodes.middleware import PROFILE; print(PROFILE)'
+    done = subprocess.run([sys.executable, '-c', probe], env=_installed_env(prefix),
+                          cwd=prefix, capture_output=True, text=True, check=True)
+    profile = pathlib.Path(done.stdout.strip())
+    assert profile.is_relative_to(prefix) and profile.is_file()
+
+
 def test_console_scripts_are_installed_and_executable(prefix):
     scripts = _console_scripts()
     assert 'model_node' in scripts

@@ -8,8 +8,8 @@ import sys
 
 import pytest
 
-from fpc_gripper.nodes.middleware import (middleware_settings, MMAP_THRESHOLD_BYTES,
-                                          OPT_OUT_ENV, PROFILE)
+from fpc_gripper.nodes.middleware import (apply_middleware_settings, middleware_settings,
+                                          MMAP_THRESHOLD_BYTES, OPT_OUT_ENV, PROFILE)
 
 PROFILE_ENV = {'FASTRTPS_DEFAULT_PROFILES_FILE': str(PROFILE),
                'RMW_FASTRTPS_USE_QOS_FROM_XML': '1'}
@@ -27,6 +27,20 @@ PROFILE_ENV = {'FASTRTPS_DEFAULT_PROFILES_FILE': str(PROFILE),
 ])
 def test_settings_apply_only_where_nobody_else_chose(environ, env, threshold):
     assert middleware_settings(environ) == (env, threshold)
+
+
+def test_apply_sets_the_variables_in_the_environment_it_is_given():
+    environ = {'RMW_IMPLEMENTATION': 'rmw_fastrtps_cpp', 'MALLOC_MMAP_THRESHOLD_': '131072'}
+    assert apply_middleware_settings(environ) == PROFILE_ENV
+    assert environ == {'RMW_IMPLEMENTATION': 'rmw_fastrtps_cpp',
+                       'MALLOC_MMAP_THRESHOLD_': '131072', **PROFILE_ENV}
+    assert apply_middleware_settings({OPT_OUT_ENV: '0'}) == {}
+
+
+def test_the_profile_is_installed_with_the_package():
+    assert PROFILE.is_file()
+    text = PROFILE.read_text()
+    assert text.count('<historyMemoryPolicy>DYNAMIC</historyMemoryPolicy>') == 2
 
 
 # A reliable keep-all reader that lets 12 messages of 1 MB queue before it takes any, then
