@@ -208,7 +208,7 @@ class Strip:
         return density, stress, tangent
 
     def gas_volume(self, u):
-        """The gas term's volume int g V dA [m^3] (g the gas width, V the gas model's)."""
+        """Return the gas term's volume int g V dA [m^3] (g the gas width, V the gas model's)."""
         volume = self._volume(self.basis.interpolate(u).grad)[0]
         return float(np.sum(self._gas * volume * self.basis.dx))
 

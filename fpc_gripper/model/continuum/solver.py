@@ -111,7 +111,7 @@ class ContinuumSolver:
 
     def band_moduli(self, pressure_work):
         """
-        The band's effective through-thickness stiffness mu_z [Pa] between ribs and at a rib.
+        Return the band's effective through-thickness stiffness mu_z [Pa], between ribs, at a rib.
 
         Under k_p P alone (no stretch along X) the band of solid width w and gas width g
         carries (2 mu_z + lam) w e = k_p P g, and its area strain is e; mu_z makes e the
@@ -148,7 +148,7 @@ class ContinuumSolver:
         return np.broadcast_to(at_rib[:, None], self.view.cell_law.shape)
 
     def _coupled_strip(self, pressure_work):
-        """The side view with the band's mu_z from the cross-sections (a new Strip)."""
+        """Return the side view with the band's mu_z from the cross-sections (a new Strip)."""
         moduli = self.band_moduli(pressure_work)
         laws = list(self.view.laws)
         cell_law = self.view.cell_law.copy()
