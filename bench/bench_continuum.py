@@ -19,6 +19,10 @@ other's stored results):
 - variants: the unloaded pressure scenes of the table again with gas_model='axial' (the
   beam rungs' gas volume, no growth of the channel through the thickness) and with
   poisson=True (a nearly incompressible fluidic layer), against the rod.
+- section: the channel cross-section (`continuum.section.ChannelSection`, h = 0.5 mm,
+  between ribs and at a rib) under k_p P for 0-400 kPa, and the table's pressurised
+  scenes with the side view's band coupled to it (channel='section', h = SECTION_SIDE_SIZE)
+  against the rod and the corrected rung.
 """
 
 import argparse
@@ -42,6 +46,7 @@ from fpc_gripper.model import (ActuatorDesign, AdaptiveSolver, ArcSolver,  # noq
                                CCMSolver, RodSolver)
 from fpc_gripper.model.analysis import fit_circle  # noqa: E402
 from fpc_gripper.model.continuum import ContinuumSolver  # noqa: E402
+from fpc_gripper.model.corrected import CorrectedSolver  # noqa: E402
 
 RESULTS = _HERE / 'results' / 'continuum.json'
 PRESTRAINS = (0.15, 0.25, 0.40)
@@ -51,6 +56,9 @@ LOADS = ((0.5, 0.0), (-0.5, 0.0), (0.0, 0.5), (0.0, -0.5))
 ELEMENT_SIZE = 1e-3
 SIZES = (2e-3, 1e-3, 0.5e-3)
 INTERIOR = (0.010, 0.070)     # [m] of reference arc length
+#: Side-view elements of the coupled table: the channel's growth moves the tip by tens of
+#: mm; 1 mm elements move it by 0.21 mm (0.25, 100 kPa; docs/physics.md, section 18.3).
+SECTION_SIDE_SIZE = 2e-3
 
 
 def _scenes(quick):
@@ -164,10 +172,59 @@ def convergence():
     return out
 
 
+def section(quick):
+    """Return the cross-section's area growth and the coupled side view's pressure scenes."""
+    design = ActuatorDesign.paper()
+    curves = []
+    for at_rib in (False, True):
+        cut = ContinuumSolver(design, element_size=SECTION_SIDE_SIZE, channel='section')
+        for pressure in PRESSURES[1:]:
+            work = design.pressure_work_factor * pressure
+            start = time.perf_counter()
+            sol = cut.section_strains(work)[at_rib]
+            curves.append({'at_rib': at_rib, 'pressure_kpa': pressure / 1e3,
+                           'pressure_work_kpa': work / 1e3, 'area_strain': sol.area_strain,
+                           'wall_strain': sol.wall_strain, 'roof_mm': sol.roof * 1e3,
+                           'floor_mm': sol.floor * 1e3, 'success': sol.success,
+                           'message': sol.message, 'seconds': time.perf_counter() - start})
+            where = 'at rib' if at_rib else 'between ribs'
+            print(f'section {where} P {pressure / 1e3:.0f} '
+                  f'kPa: area strain {sol.area_strain:.3f}, wall {sol.wall_strain:.3f}, '
+                  f'{sol.message}', flush=True)
+            if not sol.success:
+                break
+    rows = []
+    for eps0 in PRESTRAINS:
+        design = ActuatorDesign.paper(prestrain=eps0)
+        fe = ContinuumSolver(design, element_size=SECTION_SIDE_SIZE, channel='section')
+        rod, corrected = RodSolver(design, ribs='exact'), CorrectedSolver(design)
+        for pressure in ((200e3,) if quick else PRESSURES[1:]):
+            work = design.pressure_work_factor * pressure
+            try:
+                moduli = {str(k): v for k, v in fe.band_moduli(work).items()}
+            except ValueError:
+                moduli = None
+            r, row = _fe_row(fe, pressure, (0.0, 0.0))
+            row.update(prestrain=eps0, pressure_kpa=pressure / 1e3, band_mu_z_pa=moduli,
+                       rungs={})
+            for name, rung in (('rod', rod), ('corrected', corrected)):
+                beam = rung.solve(pressure=pressure)
+                row['rungs'][name] = {'tip_mm': (beam.tip * 1e3).tolist(),
+                                      'error_mm': float(np.hypot(*(beam.tip - r.tip)) * 1e3)}
+            print(f'coupled: eps0 {eps0:.2f} P {pressure / 1e3:5.0f} kPa: FE tip '
+                  f"({row['tip_mm'][0]:7.3f}, {row['tip_mm'][1]:7.3f}) mm, "
+                  f"{row['seconds']:5.1f} s, {row['message']}; "
+                  + ', '.join(f"{k} {v['error_mm']:.3f}" for k, v in row['rungs'].items())
+                  + ' mm', flush=True)
+            rows.append(row)
+    return {'curves': curves, 'rows': rows}
+
+
 def main(argv=None):
     """Run the parts asked for and merge them into bench/results/continuum.json."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[1])
-    parser.add_argument('--part', choices=('table', 'convergence', 'variants', 'all'),
+    parser.add_argument('--part', choices=('table', 'convergence', 'variants', 'section',
+                                           'all'),
                         default='all')
     parser.add_argument('--quick', action='store_true', help='a few scenes, not stored')
     args = parser.parse_args(argv)
@@ -185,6 +242,11 @@ def main(argv=None):
     if args.part in ('variants', 'all'):
         parts['variants'] = {'meta': meta, 'element_size_mm': ELEMENT_SIZE * 1e3,
                              'rows': variants(args.quick)}
+    if args.part in ('section', 'all'):
+        parts['section'] = {'meta': meta, 'side_element_size_mm': SECTION_SIDE_SIZE * 1e3,
+                            'section_element_size_mm': 0.5, 'ribs': 'exact',
+                            'pressure_model': 'design (k_p = 2.5)', 'poisson': False,
+                            **section(args.quick)}
     if not args.quick:
         # Read just before writing: parts run in parallel keep each other's results.
         stored = json.loads(RESULTS.read_text()) if RESULTS.exists() else {}

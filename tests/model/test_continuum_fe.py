@@ -6,9 +6,9 @@ import pytest
 from scipy.linalg import polar
 
 from fpc_gripper.model import ActuatorDesign, Material
-from fpc_gripper.model.continuum.material import (biot_response, linear_material,
-                                                  pemc_material, stretch_response,
-                                                  volume_response)
+from fpc_gripper.model.continuum.material import (biot_response, BiotMaterial,
+                                                  linear_material, pemc_material,
+                                                  stretch_response, volume_response)
 
 pytest.importorskip('skfem')
 
@@ -18,11 +18,13 @@ LAWS = {
     'linear': linear_material(Material(1.2e6, 1.2e6, 0.48), eigenstrain=0.01),
     'decoupled': linear_material(Material(263e6, 263e6, 0.43), poisson=False),
     'pemc': pemc_material(ActuatorDesign.paper().emc_coefficients, 0.25),
+    # The channel band's effective law: its through-thickness mu_z apart from its shear.
+    'band': BiotMaterial((7.8e5, 0.0, 0.0, 0.0), 4.05e5, 1.0e5, 0.0, mu_z=5.0e4),
 }
 
 
 def _params(law):
-    return np.array([*law.coefficients, law.mu, law.lam, law.eigenstrain])
+    return law.params
 
 
 def _deformation(angle, seed):
@@ -32,14 +34,17 @@ def _deformation(angle, seed):
     return rotation @ stretch - np.eye(2)
 
 
+@pytest.mark.parametrize('name', ['decoupled', 'band'])
 @pytest.mark.parametrize('angle', [0.0, 1.3, 3.0, -2.4])
-def test_the_biot_strain_is_the_polar_stretch(angle):
+def test_the_biot_strain_is_the_polar_stretch(angle, name):
     grad = _deformation(angle, 1)
-    law = LAWS['decoupled']
+    law = LAWS[name]
     psi = biot_response(grad, _params(law))[0]
     _, stretch = polar(np.eye(2) + grad)
     e = stretch - np.eye(2)
-    expected = law.coefficients[0] * e[0, 0] ** 2 + law.mu * (e[1, 1] ** 2 + 2 * e[0, 1] ** 2)
+    mu_z = law.mu if law.mu_z is None else law.mu_z
+    expected = law.coefficients[0] * e[0, 0] ** 2 + mu_z * e[1, 1] ** 2 \
+        + 2 * law.mu * e[0, 1] ** 2 + 0.5 * law.lam * (e[0, 0] + e[1, 1]) ** 2
     assert_allclose(psi, expected, rtol=1e-12)
 
 

@@ -2,7 +2,7 @@
 
 import importlib
 
-__all__ = ['ContinuumSolver', 'require_skfem']
+__all__ = ['ChannelSection', 'ContinuumSolver', 'require_skfem']
 
 
 def require_skfem():
@@ -20,4 +20,8 @@ def __getattr__(name):
         require_skfem()
         from .solver import ContinuumSolver
         return ContinuumSolver
+    if name == 'ChannelSection':
+        require_skfem()
+        from .section import ChannelSection
+        return ChannelSection
     raise AttributeError(f'module {__name__!r} has no attribute {name!r}')

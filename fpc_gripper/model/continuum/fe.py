@@ -122,9 +122,8 @@ class Strip:
         ix = np.searchsorted(self.x_breaks, centre[0]) - 1
         iz = np.searchsorted(self.z_breaks, centre[1]) - 1
         cell = np.asarray(cell_law)[ix, iz]
-        table = np.array([[*law.coefficients, law.mu, law.lam, law.eigenstrain]
-                          for law in laws])
-        # (7, elements, 1): broadcast against the quadrature points.
+        table = np.array([law.params for law in laws])
+        # (8, elements, 1): broadcast against the quadrature points.
         self._params = table[cell].T[:, :, None]
         self._width = np.asarray(width, dtype=float)[ix, iz][:, None]
         self._gas = np.asarray(gas_width, dtype=float)[ix, iz][:, None]
@@ -207,6 +206,11 @@ class Strip:
             second = second[..., None, None]
         tangent = self._width * tangent - gas * second
         return density, stress, tangent
+
+    def gas_volume(self, u):
+        """Return the gas term's volume int g V dA [m^3] (g the gas width, V the gas model's)."""
+        volume = self._volume(self.basis.interpolate(u).grad)[0]
+        return float(np.sum(self._gas * volume * self.basis.dx))
 
     def load_vector(self, tip_force):
         """Nodal forces of a total tip force (f_x, f_z) [N] spread by the tip profile."""

@@ -24,7 +24,7 @@ class BiotMaterial:
     """
     A plane-strain law psi(e) of the Biot strain e = U - I, per unit reference volume.
 
-        psi = sum_k c_k s^k + mu (e22^2 + 2 e12^2) + lam/2 (s + e22)^2,  s = e11 - eigenstrain,
+        psi = sum_k c_k s^k + mu_z e22^2 + 2 mu e12^2 + lam/2 (s + e22)^2,  s = e11 - eigenstrain,
 
     k = 2..5, axis 1 the finger's X (the fibre direction of the PEMC law), axis 2 its Z.
     A linear isotropic layer (Lame mu, lam) has c2 = mu and no higher terms, so that
@@ -41,6 +41,10 @@ class BiotMaterial:
         [Pa].
     eigenstrain : float
         Stress-free strain along X [-]; the PEMC's is -prestrain.
+    mu_z : float, optional
+        Coefficient of e22^2 [Pa]; None (every lamina) is mu. An effective law sets it
+        apart from the shear modulus: the side view's channel band, whose through-thickness
+        stiffness is the channel cross-section's (`section.ChannelSection`).
 
     """
 
@@ -48,6 +52,13 @@ class BiotMaterial:
     mu: float
     lam: float
     eigenstrain: float = 0.0
+    mu_z: float = None
+
+    @property
+    def params(self):
+        """(c2, c3, c4, c5, mu, lam, eigenstrain, mu_z) as `biot_response` takes them."""
+        mu_z = self.mu if self.mu_z is None else self.mu_z
+        return np.array([*self.coefficients, self.mu, self.lam, self.eigenstrain, mu_z])
 
 
 def linear_material(material, eigenstrain=0.0, poisson=True):
@@ -99,17 +110,19 @@ def pemc_material(emc_coefficients, prestrain):
 
 def _law(params, e11, e22, e12):
     """Return psi, its gradient (3, ...) and Hessian (3, 3, ...) in (e11, e22, e12)."""
-    c2, c3, c4, c5, mu, lam, eig = params
+    c2, c3, c4, c5, mu, lam, eig = params[:7]
+    # Seven parameters: mu_z is mu (every lamina's law).
+    mu_z = params[7] if len(params) > 7 else mu
     s = e11 - eig
     tr = s + e22
-    psi = s * s * (c2 + s * (c3 + s * (c4 + s * c5))) + mu * (e22 * e22 + 2.0 * e12 * e12) \
-        + 0.5 * lam * tr * tr
+    psi = s * s * (c2 + s * (c3 + s * (c4 + s * c5))) + mu_z * e22 * e22 \
+        + 2.0 * mu * e12 * e12 + 0.5 * lam * tr * tr
     d1 = s * (2.0 * c2 + s * (3.0 * c3 + s * (4.0 * c4 + s * 5.0 * c5)))
     d2 = 2.0 * c2 + s * (6.0 * c3 + s * (12.0 * c4 + s * 20.0 * c5))
     zero = np.zeros_like(s)
-    grad = np.stack([d1 + lam * tr, 2.0 * mu * e22 + lam * tr, 4.0 * mu * e12])
+    grad = np.stack([d1 + lam * tr, 2.0 * mu_z * e22 + lam * tr, 4.0 * mu * e12])
     hess = np.stack([np.stack([d2 + lam, lam + zero, zero]),
-                     np.stack([lam + zero, 2.0 * mu + lam + zero, zero]),
+                     np.stack([lam + zero, 2.0 * mu_z + lam + zero, zero]),
                      np.stack([zero, zero, 4.0 * mu + zero])])
     return psi, grad, hess
 
@@ -128,8 +141,9 @@ def biot_response(grad_u, params):
     ----------
     grad_u : ndarray, shape (2, 2, ...)
         Displacement gradient d u_i / d X_J [-].
-    params : ndarray, shape (7, ...)
-        (c2, c3, c4, c5, mu, lam, eigenstrain) broadcast against grad_u[0, 0].
+    params : ndarray, shape (7, ...) or (8, ...)
+        (c2, c3, c4, c5, mu, lam, eigenstrain[, mu_z]) broadcast against grad_u[0, 0]
+        (`BiotMaterial.params`; without mu_z it is mu).
 
     Returns
     -------

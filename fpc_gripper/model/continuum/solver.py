@@ -3,7 +3,9 @@
 import numpy as np
 
 from .body import side_view
-from .fe import Strip
+from .fe import Strip, StripSolution
+from .material import BiotMaterial
+from .section import ChannelSection
 from ..analysis import fit_circle
 from ..engine import SolverStatus
 from ..result import FINGER_FIELDS, Result
@@ -45,14 +47,27 @@ class ContinuumSolver:
         exact potential of a follower pressure on its walls. 'axial': the beam rungs'
         volume, the band's X-fibre stretch, without the channel's growth through the
         thickness (`fe.Strip`).
+    channel : {'band', 'section'}
+        'band' (the default): the homogenised band's through-thickness law is the fluidic
+        layer's. 'section': under pressure, the band's through-thickness stiffness `mu_z`
+        is set per scene so that, under k_p P alone, the band's area grows as the channel
+        cross-section's (`section.ChannelSection`, a void with its roof, floor and walls):
+        between ribs as the section between ribs, at a rib as the section through it
+        (`band_moduli`). Needs ribs='exact' and gas_model='area'; unpressurised it is
+        'band'.
 
     """
 
     def __init__(self, design, ribs='exact', element_size=1e-3, pressure_model=None,
-                 poisson=False, gas_model='area'):
+                 poisson=False, gas_model='area', channel='band'):
         size = real_number('element_size', element_size, '[m]')
         if not 0.0 < size <= 5e-3:
             raise ArgumentError('element_size', f'must be in (0, 0.005] [m], got {size}')
+        if channel not in ('band', 'section'):
+            raise ArgumentError('channel', f"must be 'band' or 'section', got {channel!r}")
+        if channel == 'section' and (ribs != 'exact' or gas_model != 'area'):
+            raise ArgumentError('channel', "'section' needs ribs='exact' and "
+                                f"gas_model='area', got {ribs!r} and {gas_model!r}")
         name = check_pressure_model(pressure_model)
         self.design = design
         self.pressure_work_factor = design.pressure_work_factor if name == 'design' \
@@ -60,12 +75,91 @@ class ContinuumSolver:
         self.view = side_view(design, ribs, poisson)
         self.ribs = ribs
         self.element_size = size
+        self.channel = channel
+        self.poisson = bool(poisson)
         self.strip = Strip(self.view.x_breaks, self.view.z_breaks, self.view.cell_law,
                            self.view.laws, self.view.width, self.view.gas_width, size,
                            gas_model=gas_model)
         self._x, self._mid = self.strip.line_dofs(0.0)
         self._tip = self.strip.vertex_dofs(design.free_length, 0.0)
-        self.model = f'continuum h={size * 1e3:.3g} mm, ribs {ribs}, gas {gas_model}'
+        self._sections = {}
+        self.model = f'continuum h={size * 1e3:.3g} mm, ribs {ribs}, gas {gas_model}' \
+            + (', channel section' if channel == 'section' else '')
+
+    def section_strains(self, pressure_work):
+        """
+        Area strain of the channel cross-section between ribs and at a rib under k_p P.
+
+        Parameters
+        ----------
+        pressure_work : float
+            k_p P [Pa].
+
+        Returns
+        -------
+        dict
+            {False: SectionSolution between ribs, True: at a rib (designs with ribs)}.
+
+        """
+        key = float(pressure_work)
+        if key not in self._sections:
+            kinds = (False, True) if self.design.ribs else (False,)
+            self._sections[key] = {
+                at_rib: ChannelSection(self.design, at_rib, self.poisson).solve(key)
+                for at_rib in kinds}
+        return self._sections[key]
+
+    def band_moduli(self, pressure_work):
+        """
+        Return the band's effective through-thickness stiffness mu_z [Pa], between ribs, at a rib.
+
+        Under k_p P alone (no stretch along X) the band of solid width w and gas width g
+        carries (2 mu_z + lam) w e = k_p P g, and its area strain is e; mu_z makes e the
+        cross-section's area strain a: mu_z = (k_p P g / (w a) - lam) / 2, the secant
+        stiffness of the channel's growth at that pressure.
+
+        Returns
+        -------
+        dict
+            {at_rib: mu_z}; raises ValueError if a section has no equilibrium there.
+
+        """
+        band = self.view.gas_width > 0.0
+        fluidic = self.view.laws[1]
+        out = {}
+        for at_rib, sol in self.section_strains(pressure_work).items():
+            if not sol.success:
+                where = 'at a rib' if at_rib else 'between ribs'
+                raise ValueError(f'the channel cross-section ({where}) has no equilibrium '
+                                 f'at k_p P = {pressure_work:g} [Pa]: {sol.message}')
+            cells = band & (self._rib_cells() == at_rib)
+            g = float(self.view.gas_width[cells][0])
+            w = float(self.view.width[cells][0])
+            out[at_rib] = 0.5 * (pressure_work * g / (w * sol.area_strain) - fluidic.lam)
+        return out
+
+    def _rib_cells(self):
+        """Boolean per cell: the band cell lies at a transverse rib."""
+        x = 0.5 * (self.view.x_breaks[1:] + self.view.x_breaks[:-1])
+        at_rib = np.zeros(x.size, dtype=bool)
+        if self.design.ribs:
+            for lo, hi in self.design.transverse_ribs():
+                at_rib |= (x > lo) & (x < hi)
+        return np.broadcast_to(at_rib[:, None], self.view.cell_law.shape)
+
+    def _coupled_strip(self, pressure_work):
+        """Return the side view with the band's mu_z from the cross-sections (a new Strip)."""
+        moduli = self.band_moduli(pressure_work)
+        laws = list(self.view.laws)
+        cell_law = self.view.cell_law.copy()
+        band = self.view.gas_width > 0.0
+        fluidic = laws[1]
+        for at_rib, mu_z in moduli.items():
+            laws.append(BiotMaterial(fluidic.coefficients, fluidic.mu, fluidic.lam,
+                                     fluidic.eigenstrain, mu_z))
+            cell_law[band & (self._rib_cells() == at_rib)] = len(laws) - 1
+        return Strip(self.view.x_breaks, self.view.z_breaks, cell_law, laws, self.view.width,
+                     self.view.gas_width, self.element_size)
 
     def solve(self, pressure=0.0, tip_force=(0.0, 0.0)):
         """
@@ -91,7 +185,16 @@ class ContinuumSolver:
             raise ArgumentError('pressure', f'must be in [0, {self.design.max_pressure:g}] '
                                             f'[Pa], got {pressure}')
         tip_force = real_pair('tip_force', tip_force, '[N]')
-        out = self.strip.solve(self.pressure_work_factor * pressure, tip_force)
+        work = self.pressure_work_factor * pressure
+        strip, out = self.strip, None
+        if self.channel == 'section' and work > 0.0:
+            try:
+                strip = self._coupled_strip(work)
+            except ValueError as exc:
+                # No band law to solve with: the flat state, failed, with the reason.
+                out = StripSolution(np.zeros(strip.n_dofs), False, str(exc), 0, 0, 0.0)
+        if out is None:
+            out = strip.solve(work, tip_force)
         u = out.u
         points = np.stack([self._x + u[self._mid[0]], u[self._mid[1]]], axis=1)
         tip = np.array([self.design.free_length + u[self._tip[0]], u[self._tip[1]]])
@@ -110,8 +213,8 @@ class ContinuumSolver:
             success=out.success, status=status, message=out.message, iterations=out.iterations,
             pressure=pressure, tip_force=tip_force, point_loads=(), model=self.model,
             rung='continuum', n_segments=columns.size - 1, segment_edges=columns, state=u,
-            x=u, tip=tip, valid=True, nodes=position_at(columns), energy=self.strip.energy(
-                u, out.fraction, self.pressure_work_factor * pressure, tip_force),
+            x=u, tip=tip, valid=True, nodes=position_at(columns), energy=strip.energy(
+                u, out.fraction, work, tip_force),
             points=points, curvature=fit.curvature, fit_rmsd=fit.rmsd,
             position_at=position_at, fraction=out.fraction, n_dofs=self.strip.n_dofs,
             load_steps=out.steps)
