@@ -77,6 +77,24 @@ def _interior_curvature(result):
     return fit_circle(result.position_at(s)).curvature
 
 
+def _rung_rows(rungs, fe_tip, pressure, load=(0.0, 0.0)):
+    """Return each beam rung's tip in the scene and its distance to the FE's [mm]."""
+    rows = {}
+    for name, rung in rungs.items():
+        beam = rung.solve(pressure=pressure, tip_force=load)
+        rows[name] = {'tip_mm': (beam.tip * 1e3).tolist(),
+                      'error_mm': float(np.hypot(*(beam.tip - fe_tip)) * 1e3),
+                      'success': bool(beam.success)}
+    return rows
+
+
+def _print_row(head, row):
+    """Print a scene's line: `head`, the FE's time and message, each rung's distance."""
+    print(f"{head}, {row['seconds']:5.1f} s, {row['message']}; "
+          + ', '.join(f"{k} {v['error_mm']:.3f}" for k, v in row['rungs'].items())
+          + ' mm', flush=True)
+
+
 def _fe_row(solver, pressure, load):
     start = time.perf_counter()
     r = solver.solve(pressure=pressure, tip_force=load)
@@ -129,17 +147,10 @@ def table(quick):
         fe, rungs = solvers[eps0]
         r, row = _fe_row(fe, pressure, load)
         row.update(prestrain=eps0, pressure_kpa=pressure / 1e3, tip_force=list(load))
-        row['rungs'] = {}
-        for name, rung in rungs.items():
-            beam = rung.solve(pressure=pressure, tip_force=load)
-            row['rungs'][name] = {'tip_mm': (beam.tip * 1e3).tolist(),
-                                  'error_mm': float(np.hypot(*(beam.tip - r.tip)) * 1e3),
-                                  'success': bool(beam.success)}
-        print(f'eps0 {eps0:.2f} P {pressure / 1e3:5.0f} kPa F {load}: FE tip '
-              f"({row['tip_mm'][0]:7.3f}, {row['tip_mm'][1]:7.3f}) mm, kappa "
-              f"{row['curvature']:7.3f} 1/m, {row['seconds']:5.1f} s, {row['message']}; "
-              + ', '.join(f"{k} {v['error_mm']:.3f}" for k, v in row['rungs'].items())
-              + ' mm', flush=True)
+        row['rungs'] = _rung_rows(rungs, r.tip, pressure, load)
+        _print_row(f'eps0 {eps0:.2f} P {pressure / 1e3:5.0f} kPa F {load}: FE tip '
+                   f"({row['tip_mm'][0]:7.3f}, {row['tip_mm'][1]:7.3f}) mm, kappa "
+                   f"{row['curvature']:7.3f} 1/m", row)
         rows.append(row)
     return rows
 
@@ -206,16 +217,10 @@ def section(quick):
                 moduli = None
             r, row = _fe_row(fe, pressure, (0.0, 0.0))
             row.update(prestrain=eps0, pressure_kpa=pressure / 1e3, band_mu_z_pa=moduli,
-                       rungs={})
-            for name, rung in (('rod', rod), ('corrected', corrected)):
-                beam = rung.solve(pressure=pressure)
-                row['rungs'][name] = {'tip_mm': (beam.tip * 1e3).tolist(),
-                                      'error_mm': float(np.hypot(*(beam.tip - r.tip)) * 1e3)}
-            print(f'coupled: eps0 {eps0:.2f} P {pressure / 1e3:5.0f} kPa: FE tip '
-                  f"({row['tip_mm'][0]:7.3f}, {row['tip_mm'][1]:7.3f}) mm, "
-                  f"{row['seconds']:5.1f} s, {row['message']}; "
-                  + ', '.join(f"{k} {v['error_mm']:.3f}" for k, v in row['rungs'].items())
-                  + ' mm', flush=True)
+                       rungs=_rung_rows({'rod': rod, 'corrected': corrected}, r.tip,
+                                        pressure))
+            _print_row(f'coupled: eps0 {eps0:.2f} P {pressure / 1e3:5.0f} kPa: FE tip '
+                       f"({row['tip_mm'][0]:7.3f}, {row['tip_mm'][1]:7.3f}) mm", row)
             rows.append(row)
     return {'curves': curves, 'rows': rows}
 
