@@ -13,6 +13,7 @@ from fpc_gripper.regulators.base import check_channel
 from fpc_gripper.regulators.base import check_pressure
 from fpc_gripper.safe_yaml import load_yaml
 from fpc_gripper.safe_yaml import Where
+from fpc_gripper.services.periods import period_passed
 
 REGISTER_TYPES = ('holding', 'input')
 
@@ -347,8 +348,7 @@ class ModbusRegulator:
         if not self._client.connected:
             now = self._clock()
             # A clock that stepped back must not hold off reconnection until it catches up.
-            if self._last_attempt is not None and \
-                    0.0 <= now - self._last_attempt < self._reconnect_interval:
+            if not period_passed(self._last_attempt, now, self._reconnect_interval):
                 raise BackendFault(self._fault or 'Modbus connection lost')
             self.connect()
         kwargs[self._device_kw] = self.register_map.device_id
