@@ -6,6 +6,7 @@ import numpy as np
 
 from .fe import Strip
 from .material import BiotMaterial, linear_material
+from ..validation import ArgumentError, real_number
 
 __all__ = ['ChannelSection', 'SectionSolution', 'section_laws']
 
@@ -107,7 +108,7 @@ class ChannelSection:
     def __init__(self, design, at_rib=False, poisson=False, element_size=0.5e-3,
                  void_stiffness=VOID_STIFFNESS):
         if at_rib and not design.ribs:
-            raise ValueError('`at_rib`=True needs a design with ribs, got ribs=False')
+            raise ArgumentError('at_rib', 'True needs a design with ribs, got ribs=False')
         t, w1 = design.t, design.w1
         y = [0.0, t / 2, design.Cy / 2, design.Ly / 2]
         if design.ribs:
@@ -162,9 +163,9 @@ class ChannelSection:
         SectionSolution
 
         """
-        pressure_work = float(pressure_work)
-        if not pressure_work >= 0.0:
-            raise ValueError(f'`pressure_work` must be >= 0 [Pa], got {pressure_work}')
+        pressure_work = real_number('pressure_work', pressure_work, '[Pa]')
+        if pressure_work < 0.0:
+            raise ArgumentError('pressure_work', f'must be >= 0 [Pa], got {pressure_work}')
         out = self.strip.solve(pressure_work)
         u = out.u
         height = self.design.h3a + self.design.h3b
