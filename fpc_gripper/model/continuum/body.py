@@ -30,6 +30,9 @@ class SideView:
         Solid and gas width of every cell across Y [m].
     ribs : str
         'exact' or 'average'.
+    at_rib : ndarray of bool
+        Every column of cells (along X) that lies at a transverse rib (none with
+        ribs='average').
 
     """
 
@@ -40,6 +43,7 @@ class SideView:
     width: np.ndarray
     gas_width: np.ndarray
     ribs: str
+    at_rib: np.ndarray
 
 
 def _gas_widths(design, ribs):
@@ -52,6 +56,32 @@ def _gas_widths(design, ribs):
         smeared = open_width - 2.0 * design.w1 * rib_coverage(design)
         return smeared, smeared
     return open_width, rib_width
+
+
+def layer_cells(design, breaks):
+    """
+    Return the layers' Z breaks and the law index (`LAW_NAMES`) of every cell.
+
+    Parameters
+    ----------
+    design : ActuatorDesign
+    breaks : array_like
+        The cell edges along the other axis (X in the side view, Y in the cross-section)
+        [m], sorted.
+
+    Returns
+    -------
+    z_breaks : ndarray
+        -H/2, -h3, -h3b, 0, h3a, h2, h1, H/2 [m] (0 so that the midplane is a mesh line).
+    cell_law : ndarray of int, shape (len(breaks) - 1, len(z_breaks) - 1)
+
+    """
+    z_breaks = np.unique(np.round(np.array([-design.H / 2, -design.h3, -design.h3b, 0.0,
+                                            design.h3a, design.h2, design.h1, design.H / 2]),
+                                  12))
+    zc = 0.5 * (z_breaks[1:] + z_breaks[:-1])
+    law = np.select([zc < -design.h3, zc < design.h2, zc < design.h1], [0, 1, 2], 3)
+    return z_breaks, np.broadcast_to(law, (len(breaks) - 1, zc.size)).copy()
 
 
 def side_view(design, ribs='exact', poisson=False):
@@ -84,13 +114,9 @@ def side_view(design, ribs='exact', poisson=False):
     rib_x = design.transverse_ribs() if ribs == 'exact' else np.zeros((0, 2))
     x.extend(rib_x.ravel())
     x_breaks = np.unique(np.round(np.array(x), 12))
-    z_breaks = np.unique(np.round(np.array([-design.H / 2, -design.h3, -design.h3b, 0.0,
-                                            design.h3a, design.h2, design.h1, design.H / 2]),
-                                  12))
+    z_breaks, cell_law = layer_cells(design, x_breaks)
     xc = 0.5 * (x_breaks[1:] + x_breaks[:-1])
     zc = 0.5 * (z_breaks[1:] + z_breaks[:-1])
-    law = np.select([zc < -design.h3, zc < design.h2, zc < design.h1], [0, 1, 2], 3)
-    cell_law = np.broadcast_to(law, (xc.size, zc.size)).copy()
     open_gas, rib_gas = _gas_widths(design, ribs)
     at_rib = np.zeros(xc.size, dtype=bool)
     for lo, hi in rib_x:
@@ -103,4 +129,4 @@ def side_view(design, ribs='exact', poisson=False):
             linear_material(design.emc, poisson=poisson),
             linear_material(design.constraining_layer, poisson=poisson))
     return SideView(x_breaks=x_breaks, z_breaks=z_breaks, cell_law=cell_law, laws=laws,
-                    width=design.Ly - gas, gas_width=gas, ribs=ribs)
+                    width=design.Ly - gas, gas_width=gas, ribs=ribs, at_rib=at_rib)

@@ -4,6 +4,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .body import layer_cells
 from .fe import Strip
 from .material import BiotMaterial, linear_material
 from ..validation import ArgumentError, real_number
@@ -114,13 +115,9 @@ class ChannelSection:
         if design.ribs:
             y += [3 * t / 2, 3 * t / 2 + w1]
         y_breaks = np.unique(np.round(np.array(y), 12))
-        z_breaks = np.unique(np.round(np.array([-design.H / 2, -design.h3, -design.h3b, 0.0,
-                                                design.h3a, design.h2, design.h1,
-                                                design.H / 2]), 12))
+        z_breaks, cell_law = layer_cells(design, y_breaks)
         yc = 0.5 * (y_breaks[1:] + y_breaks[:-1])
         zc = 0.5 * (z_breaks[1:] + z_breaks[:-1])
-        law = np.select([zc < -design.h3, zc < design.h2, zc < design.h1], [0, 1, 2], 3)
-        cell_law = np.broadcast_to(law, (yc.size, zc.size)).copy()
         gas_y = (yc > t / 2) & (yc < design.Cy / 2)
         if at_rib:
             gas_y &= ~((yc > 3 * t / 2) & (yc < 3 * t / 2 + w1))

@@ -132,20 +132,11 @@ class ContinuumSolver:
                 where = 'at a rib' if at_rib else 'between ribs'
                 raise ValueError(f'the channel cross-section ({where}) has no equilibrium '
                                  f'at k_p P = {pressure_work:g} [Pa]: {sol.message}')
-            cells = band & (self._rib_cells() == at_rib)
+            cells = band & (self.view.at_rib[:, None] == at_rib)
             g = float(self.view.gas_width[cells][0])
             w = float(self.view.width[cells][0])
             out[at_rib] = 0.5 * (pressure_work * g / (w * sol.area_strain) - fluidic.lam)
         return out
-
-    def _rib_cells(self):
-        """Boolean per cell: the band cell lies at a transverse rib."""
-        x = 0.5 * (self.view.x_breaks[1:] + self.view.x_breaks[:-1])
-        at_rib = np.zeros(x.size, dtype=bool)
-        if self.design.ribs:
-            for lo, hi in self.design.transverse_ribs():
-                at_rib |= (x > lo) & (x < hi)
-        return np.broadcast_to(at_rib[:, None], self.view.cell_law.shape)
 
     def _coupled_strip(self, pressure_work):
         """Return the side view with the band's mu_z from the cross-sections (a new Strip)."""
@@ -157,7 +148,7 @@ class ContinuumSolver:
         for at_rib, mu_z in moduli.items():
             laws.append(BiotMaterial(fluidic.coefficients, fluidic.mu, fluidic.lam,
                                      fluidic.eigenstrain, mu_z))
-            cell_law[band & (self._rib_cells() == at_rib)] = len(laws) - 1
+            cell_law[band & (self.view.at_rib[:, None] == at_rib)] = len(laws) - 1
         return Strip(self.view.x_breaks, self.view.z_breaks, cell_law, laws, self.view.width,
                      self.view.gas_width, self.element_size)
 
