@@ -10,6 +10,7 @@ from rclpy.action import GoalResponse
 from fpc_gripper.control.gripper_command import check_goal
 from fpc_gripper.control.gripper_command import CommandGoal
 from fpc_gripper.control.gripper_command import Outcome
+from fpc_gripper.services.periods import period_passed
 
 __all__ = ['FEEDBACK_PERIOD_S', 'GripperCommandServer']
 
@@ -84,7 +85,7 @@ class GripperCommandServer:
         result = goal.update(out, now)
         if result is not None:
             self._finish(result)
-        elif self._last_feedback is None or now - self._last_feedback >= FEEDBACK_PERIOD_S:
+        elif period_passed(self._last_feedback, now, FEEDBACK_PERIOD_S):
             self._last_feedback = now
             handle.publish_feedback(self._message(self._action.Feedback, goal.feedback(out)))
 

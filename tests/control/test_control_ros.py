@@ -192,6 +192,19 @@ class Rig:
         self._spin_until(lambda: len(self.states) > answered, 'the controller did not step')
         self._drain()
 
+    def step_back(self, seconds):
+        """
+        Set loop time back by `seconds` [s], as a restarted simulated clock does.
+
+        No control step runs at the jump itself: rcl restarts a timer's period at a
+        backwards jump, so the next `step` is the first that runs the loops again.
+        """
+        self.time_ns -= round(seconds * 1e9)
+        self._publish_clock()
+        self._spin_until(self._synced, 'a node did not take the /clock',
+                         retry=self._publish_clock)
+        self._drain()
+
     def advance(self, seconds, every=None):
         """Advance loop time by `seconds` [s], step by step."""
         for _ in range(round(seconds * 1e9 / self.period_ns)):
@@ -619,3 +632,19 @@ def test_gripper_command_out_of_range_is_rejected(rig):
                              (float('nan'), 0.0)):
         assert not client.send(position, effort).accepted
     assert r.state()['mode'] == 'idle'
+
+
+def test_gripper_command_feedback_goes_on_when_the_clock_steps_back(rig):
+    r = rig()
+    client = GripperClient(r)
+    handle = client.send(0.100)
+    r.advance(0.3)
+    assert client.feedback
+    # A simulated clock restarted 2 s earlier: the feedback last sent is dated after the
+    # new loop time. Gated on "now - last >= period" alone, it would stop for 2 s.
+    r.step_back(2.0)
+    before = len(client.feedback)
+    r.advance(0.3)
+    assert not handle.get_result_async().done()
+    # 20 Hz of loop time over 0.3 s is 6 messages; one late or lost is allowed.
+    assert len(client.feedback) - before >= 5
