@@ -579,6 +579,8 @@ class FaultInjector:
         self.events = []
         self.next_at = None
         self.backend_until = -math.inf
+        # The undecodable payloads sent: the recorder keeps them, as it keeps every message.
+        self.junk = set()
 
     def step(self, now):
         if not self.kinds or self.interval_s <= 0.0:
@@ -645,6 +647,7 @@ class FaultInjector:
 
     def _empty_payload(self, finger, now):
         count = self._burst(200)
+        self.junk.add(b'')
         for _ in range(count):
             self.probe.command_pubs[finger].publish(b'')
         return {'count': count, 'detail': '0-byte pressure_command payloads'}
@@ -657,7 +660,9 @@ class FaultInjector:
         for _ in range(count):
             body = self.rng.bytes(int(self.rng.integers(1, 257)))
             # Half of them look like little-endian CDR, so they get past the first check.
-            pub.publish((b'\x00\x01\x00\x00' + body) if self.rng.random() < 0.5 else body)
+            payload = (b'\x00\x01\x00\x00' + body) if self.rng.random() < 0.5 else body
+            self.junk.add(payload)
+            pub.publish(payload)
         return {'count': count, 'detail': f'random raw payloads on {topic}'}
 
     def _stale_stamp(self, finger, now):
@@ -840,12 +845,14 @@ def format_table(rows, duration, rate):
 
 # -- the recording --------------------------------------------------------------------------
 
-def read_recording(path, probe):
+def read_recording(path, probe, junk=frozenset()):
     """
     Read the closed MCAP file: counts, a decoded sample, and the probe comparison.
 
     Every message is iterated (chunks decompressed); one in every `stride` of each topic
-    and the last one are decoded with mcap_ros2. For the compared topics, the stamps the
+    and the last one are decoded with mcap_ros2. A sampled message that does not decode
+    and is one of the `junk` payloads the soak sent is counted as such (``junk_sampled``),
+    not as a failure: the recorder keeps what was on the wire. For the compared topics, the
     probe received in the counting window are looked up among the recorded publish times
     (the recorder's header stamps).
     """
@@ -857,7 +864,7 @@ def read_recording(path, probe):
     stamps = collections.defaultdict(list)
     decode = DecoderFactory()
     decoders = {}
-    decoded = failures = 0
+    sampled = collections.Counter()
     last = {}
     stride = 997
     wanted = {f'/{f}/{t}': (t, f) for t, f in probe.received}
@@ -873,17 +880,14 @@ def read_recording(path, probe):
             if topic in wanted and message.publish_time != message.log_time:
                 stamps[topic].append(message.publish_time)
             if counts[topic] % stride == 1:
-                ok = _decode(decoders, decode, schema, channel, message)
-                decoded += ok
-                failures += not ok
+                sampled[_decode(decoders, decode, schema, channel, message, junk)] += 1
             last[topic] = (schema, channel, message)
     for schema, channel, message in last.values():
-        ok = _decode(decoders, decode, schema, channel, message)
-        decoded += ok
-        failures += not ok
+        sampled[_decode(decoders, decode, schema, channel, message, junk)] += 1
     out['iterated_count'] = sum(counts.values())
-    out['decoded'] = decoded
-    out['decode_failures'] = failures
+    out['decoded'] = sampled['decoded']
+    out['decode_failures'] = sampled['failure']
+    out['junk_sampled'] = sampled['junk']
     out['topics'] = dict(sorted(counts.items()))
     comparison = {}
     probed, missing = [], []
@@ -930,14 +934,15 @@ def count_readable(path):
     return {'readable_count': count, 'error': error}
 
 
-def _decode(decoders, factory, schema, channel, message):
+def _decode(decoders, factory, schema, channel, message, junk=frozenset()):
+    """Decode one message: 'decoded', 'junk' (one of the soak's own, undecodable) or 'failure'."""
     try:
         if channel.id not in decoders:
             decoders[channel.id] = factory.decoder_for(channel.message_encoding, schema)
         decoders[channel.id](message.data)
-        return True
+        return 'decoded'
     except Exception:  # noqa: BLE001 - any failure to decode counts as one
-        return False
+        return 'junk' if bytes(message.data) in junk else 'failure'
 
 
 # -- chart ----------------------------------------------------------------------------------
@@ -1166,7 +1171,7 @@ class Soak:
         args = self.args
         names = list(self.procs) + ['soak']
         try:
-            recording = read_recording(self.mcap_path, probe)
+            recording = read_recording(self.mcap_path, probe, faults.junk)
         except Exception as exc:  # noqa: BLE001 - an unreadable recording is the finding
             recording = {'path': str(self.mcap_path), 'closed': False, 'decode_failures': None,
                          'size_mib': self.mcap_path.stat().st_size / 2 ** 20
@@ -1252,7 +1257,8 @@ def _recording_text(rec):
                if c['missing_from_recording']}
     return (f'{rec["size_mib"]:.1f} MiB, closed {rec["closed"]}, {rec["iterated_count"]} '
             f'messages iterated (summary {rec["summary_count"]}), {rec["decoded"]} decoded, '
-            f'{rec["decode_failures"]} failures; probe messages missing from it: '
+            f'{rec["decode_failures"]} failures ({rec["junk_sampled"]} of the soak\'s own junk '
+            f'payloads among the sampled); probe messages missing from it: '
             f'{missing or "none"} of {sum(c["probe"] for c in rec["comparison"].values())}')
 
 

@@ -1,9 +1,10 @@
-"""The soak benchmark's own measuring parts: CDR header reading and command-to-shape matching."""
+"""The soak benchmark's own measuring parts: CDR headers, command-shape matching, the recording."""
 
 import math
 import pathlib
 import sys
 import threading
+import types
 
 from nav_msgs.msg import Path
 import numpy as np
@@ -13,7 +14,9 @@ from sensor_msgs.msg import FluidPressure
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / 'bench'))
 from soak import cdr_fluid_pressure, cdr_header, LatencyTracker, NS  # noqa: E402, I100
-from soak import SpilledArray  # noqa: E402
+from soak import read_recording, SpilledArray  # noqa: E402
+
+from fpc_gripper.io.mcap_writer import Rosbag2McapWriter  # noqa: E402
 
 
 def _pressure(sec, nanosec, frame, value):
@@ -112,3 +115,22 @@ def test_spilling_from_another_thread_loses_nothing():
         records.spill()
     thread.join()
     assert_array_equal(np.asarray(records), np.arange(200_000))
+
+
+def test_the_recording_check_counts_the_soaks_own_junk_apart_from_a_failure(tmp_path):
+    # One message per topic: each is sampled as its topic's first and again as its last.
+    good = _pressure(1, 0, 'finger_0', 1.0e5)
+    junk = b'\x00\x01\x00\x00' + bytes(range(9))       # sent by the soak's faults
+    corrupt = good[:len(good) // 2]                       # sent by no one: a real failure
+    path = tmp_path / 'r.mcap'
+    with Rosbag2McapWriter(path) as writer:
+        for i, (topic, data) in enumerate((('/good', good), ('/junk', junk),
+                                           ('/corrupt', corrupt))):
+            writer.add_topic(topic, 'sensor_msgs/msg/FluidPressure')
+            writer.write(topic, data, NS + i)
+    probe = types.SimpleNamespace(received={}, t0_ns=0)
+    out = read_recording(path, probe, junk={junk, b''})
+    assert (out['decoded'], out['junk_sampled'], out['decode_failures']) == (2, 2, 2)
+    # Without the soak's list, its junk is a failure like any other.
+    out = read_recording(path, probe)
+    assert (out['decoded'], out['junk_sampled'], out['decode_failures']) == (2, 0, 4)
