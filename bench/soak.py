@@ -731,13 +731,23 @@ def percentiles(values):
             'n': int(data.size)}
 
 
-def slope_per_hour(times, values):
-    """Least-squares slope of values against times [s], per hour (NaN with < 3 points)."""
+def slope_per_hour(times, values, robust=False):
+    """
+    Slope of values against times [s], per hour (NaN with < 3 points).
+
+    Least squares by default. With `robust`, Theil-Sen's (scipy): the median of the
+    slopes between every two samples, which a bump that comes back (a burst of large
+    messages held for a minute) moves little, where it tilts a least-squares line
+    fitted near one end of the run.
+    """
     t = np.asarray(times, dtype=float)
     v = np.asarray(values, dtype=float)
     good = np.isfinite(t) & np.isfinite(v)
     if good.sum() < 3:
         return math.nan
+    if robust:
+        from scipy.stats import theilslopes
+        return float(theilslopes(v[good], t[good])[0] * 3600.0)
     return float(np.polyfit(t[good], v[good], 1)[0] * 3600.0)
 
 
@@ -1167,6 +1177,14 @@ class Soak:
         stopped['left_running'] = left
         return stopped
 
+    def _rss_slopes(self, names, robust):
+        """Each process's RSS slope [MiB/h] over the samples after the first minute."""
+        after = [s for s in self.samples if s['t'] > 60.0]
+        return {name: slope_per_hour([s['t'] for s in after],
+                                     [s['proc'][name].get('rss_mib', math.nan) for s in after],
+                                     robust)
+                for name in names}
+
     def report(self, probe, faults, started, duration, stopped):
         args = self.args
         names = list(self.procs) + ['soak']
@@ -1205,11 +1223,8 @@ class Soak:
             'commands': {key: sum(s[key] for s in self.samples)
                          for key in ('commands', 'exact', 'merged', 'lost', 'shapes',
                                      'shape_gaps')},
-            'rss_slope_mib_per_h': {
-                name: slope_per_hour([s['t'] for s in self.samples if s['t'] > 60.0],
-                                     [s['proc'][name].get('rss_mib', math.nan)
-                                      for s in self.samples if s['t'] > 60.0])
-                for name in names},
+            'rss_slope_mib_per_h': self._rss_slopes(names, robust=False),
+            'rss_slope_theil_sen_mib_per_h': self._rss_slopes(names, robust=True),
             'faults': faults.events, 'fault_counts': dict(sorted(kinds.items())),
             'goals': goals,
             'goals_reached': f'{sum(g["reached"] for g in goals)} / {len(goals)}',
@@ -1229,8 +1244,9 @@ class Soak:
         print(f'faults: {results["fault_counts"]}; model_node counters at the end: '
               f'{self.samples[-1]["model_counters"] if self.samples else {}}')
         print(f'recording: {_recording_text(recording)}')
-        print('RSS slope after the first minute [MiB/h]: ' + ', '.join(
-            f'{n} {v:+.1f}' for n, v in results['rss_slope_mib_per_h'].items()))
+        print('RSS slope after the first minute [MiB/h], least squares (Theil-Sen): ' + ', '.join(
+            f'{n} {v:+.1f} ({results["rss_slope_theil_sen_mib_per_h"][n]:+.1f})'
+            for n, v in results['rss_slope_mib_per_h'].items()))
         for crash in self.crashes:
             print(f'CRASH: {crash["node"]} exited {crash["exit_code"]} at {crash["t"]:.1f} s; '
                   f'log tail:\n{crash["log_tail"][-1500:]}')

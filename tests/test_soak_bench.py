@@ -9,12 +9,13 @@ import types
 from nav_msgs.msg import Path
 import numpy as np
 from numpy.testing import assert_array_equal
+import pytest
 from rclpy.serialization import serialize_message
 from sensor_msgs.msg import FluidPressure
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / 'bench'))
 from soak import cdr_fluid_pressure, cdr_header, LatencyTracker, NS  # noqa: E402, I100
-from soak import read_recording, SpilledArray  # noqa: E402
+from soak import read_recording, slope_per_hour, SpilledArray  # noqa: E402
 
 from fpc_gripper.io.mcap_writer import Rosbag2McapWriter  # noqa: E402
 
@@ -134,3 +135,24 @@ def test_the_recording_check_counts_the_soaks_own_junk_apart_from_a_failure(tmp_
     # Without the soak's list, its junk is a failure like any other.
     out = read_recording(path, probe)
     assert (out['decoded'], out['junk_sampled'], out['decode_failures']) == (2, 0, 4)
+
+
+def test_rss_slopes_least_squares_and_theil_sen():
+    # 30 min sampled every 5 s: 350 MiB rising 1 MiB/h, and 7 MiB held for a minute from
+    # minute 26 (a bump that comes back, as a burst of large messages leaves).
+    t = np.arange(60.0, 1800.0 + 1e-9, 5.0)
+    rss = 350.0 + t / 3600.0
+    bumped = rss + np.where((t >= 1560.0) & (t < 1620.0), 7.0, 0.0)
+    assert slope_per_hour(t, rss) == pytest.approx(1.0, rel=1e-9)
+    assert slope_per_hour(t, rss, robust=True) == pytest.approx(1.0, rel=1e-9)
+    # Least squares by hand (numpy's polyfit is what the soak calls): the bump tilts it.
+    centred = t - t.mean()
+    by_hand = (centred * (bumped - bumped.mean())).sum() / (centred ** 2).sum() * 3600.0
+    assert by_hand > 2.0
+    assert slope_per_hour(t, bumped) == pytest.approx(by_hand, rel=1e-9)
+    assert slope_per_hour(t, bumped, robust=True) == pytest.approx(1.0, abs=0.05)
+    # NaN samples (a process gone) are left out; fewer than three points give NaN.
+    holes = rss.copy()
+    holes[::7] = np.nan
+    assert slope_per_hour(t, holes, robust=True) == pytest.approx(1.0, rel=1e-9)
+    assert math.isnan(slope_per_hour(t[:2], rss[:2], robust=True))
