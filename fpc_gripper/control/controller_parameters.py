@@ -11,6 +11,7 @@ from fpc_gripper.grasp.objects import OBJECTS
 from fpc_gripper.model import PRESSURE_MODEL_NAMES
 from fpc_gripper.model.pipeline import MAX_SEGMENTS
 from fpc_gripper.model.pipeline import ModelSettings
+from fpc_gripper.services.input_limits import atmospheric_pressure_row
 
 __all__ = ['LAW_PARAMETERS', 'law_config', 'make_law', 'parameter_table']
 
@@ -92,9 +93,7 @@ def parameter_table(config_max_pressure):
          {'read_only': True, 'floating_point_range': (1.0e-3, 0.5)}),
         ('object_height', 0.0, "Height of the object's lowest point above the palm [m].",
          {'read_only': True, 'floating_point_range': (0.0, 0.5)}),
-        ('atmospheric_pressure', 101325.0,
-         'Atmospheric pressure [Pa]: absolute = gauge + atmospheric_pressure.',
-         {'floating_point_range': (3.0e4, 1.2e5)}),
+        atmospheric_pressure_row(),
         ('frame_prefix', '', 'Prefix of the finger frames (<prefix>finger_<i>) of the '
          "commands and of the tip forces accepted, as model_node's.", {'read_only': True}),
     )

@@ -2,6 +2,7 @@
 
 from fpc_gripper.grasp.objects import OBJECTS
 from fpc_gripper.io.config import default_gripper_config_path
+from fpc_gripper.services.input_limits import atmospheric_pressure_row
 
 __all__ = ['METHODS', 'PARAMETERS']
 
@@ -25,6 +26,5 @@ PARAMETERS = (
      {'read_only': True, 'additional_constraints': f'one of {list(METHODS)}'}),
     ('stiffness_n_m', 200.0, 'Surface stiffness of the penalty method [N/m].',
      {'read_only': True, 'floating_point_range': (1.0, 1e6)}),
-    ('atmospheric_pressure', 101325.0, '[Pa]: gauge = absolute - atmospheric_pressure.',
-     {'floating_point_range': (3e4, 1.2e5)}),
+    atmospheric_pressure_row(),
 )

@@ -5,6 +5,7 @@ import math
 from fpc_gripper.io.config import default_gripper_config_path
 from fpc_gripper.regulators.factory import BACKEND_KINDS
 from fpc_gripper.regulators.safety import SafeState
+from fpc_gripper.services.input_limits import atmospheric_pressure_row
 
 __all__ = ['BOUND_PARAMETERS', 'LIMIT_PARAMETERS', 'PARAMETERS', 'SAFE_STATES',
            'SIM_PARAMETERS', 'SIM_TIME_REFUSED', 'STRUCTURAL', 'limits', 'refusal']
@@ -56,9 +57,7 @@ PARAMETERS = (
     ('diagnostics_rate_hz', 2.0,
      'Diagnostics rate [Hz]; a change of state is published at once.',
      {'floating_point_range': (0.1, 100.0)}),
-    ('atmospheric_pressure', 101325.0,
-     'Atmospheric pressure [Pa]: gauge = absolute - atmospheric_pressure.',
-     {'floating_point_range': (3.0e4, 1.2e5)}),
+    atmospheric_pressure_row(),
     ('auto_activate', False, 'Configure and activate at start-up (main defaults it to '
      'true; gripper.launch.py sets false and drives the transitions).',
      {'read_only': True}),

@@ -13,9 +13,9 @@ from fpc_gripper.model.validation import integer
 from fpc_gripper.services.logs import bounded
 
 __all__ = ['BOUND_NAMES', 'DEFAULT_BOUNDS', 'InputBounds', 'InputCheck', 'MAX_STAMP_NS',
-           'MAX_STAMP_SEC', 'Rejection', 'check_absolute_pressure', 'check_frame',
-           'check_stamp', 'check_tip_force_value', 'checked_bounds', 'input_bound_table',
-           'real_or_none', 'stale_detail']
+           'MAX_STAMP_SEC', 'Rejection', 'atmospheric_pressure_row', 'check_absolute_pressure',
+           'check_frame', 'check_stamp', 'check_tip_force_value', 'checked_bounds',
+           'input_bound_table', 'real_or_none', 'stale_detail']
 
 #: Largest ``builtin_interfaces/Time.sec`` (an int32) [s].
 MAX_STAMP_SEC = 2 ** 31 - 1
@@ -174,6 +174,18 @@ def input_bound_table(names=BOUND_NAMES):
             {'integer_range': (64, 1 << 24)}),
     }
     return tuple((name, *rows[name]) for name in names)
+
+
+def atmospheric_pressure_row():
+    """
+    Return the parameter-table row of ``atmospheric_pressure``, its range as a pair.
+
+    Every node that converts between absolute pressures on its topics and gauge pressures
+    declares it so.
+    """
+    return ('atmospheric_pressure', 101325.0,
+            'Atmospheric pressure [Pa]: gauge = absolute - atmospheric_pressure.',
+            {'floating_point_range': (3.0e4, 1.2e5)})
 
 
 def checked_bounds(bounds, frames=()):

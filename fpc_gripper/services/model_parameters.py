@@ -5,6 +5,7 @@ import math
 from fpc_gripper.model import PRESSURE_MODEL_NAMES
 from fpc_gripper.model.pipeline import MAX_SEGMENTS
 from fpc_gripper.model.pipeline import ModelSettings
+from fpc_gripper.services.input_limits import atmospheric_pressure_row
 from fpc_gripper.services.input_limits import input_bound_table
 from fpc_gripper.services.model_core import DEFAULT_STALE_AFTER_S
 
@@ -52,9 +53,7 @@ def parameter_table(gripper_config):
          "'command': finger_<i>/pressure_command (reliable); 'measured': finger_<i>/pressure "
          '(sensor data QoS). Both absolute [Pa].',
          {'read_only': True, 'additional_constraints': f'one of {list(PRESSURE_INPUTS)}'}),
-        ('atmospheric_pressure', 101325.0,
-         'Atmospheric pressure [Pa]: gauge = absolute - atmospheric_pressure.',
-         {'floating_point_range': (3.0e4, 1.2e5)}),
+        atmospheric_pressure_row(),
         ('stale_after_s', DEFAULT_STALE_AFTER_S,
          'Inputs whose header stamp is older than this against the node clock are rejected '
          '[s]; 0 disables. Unstamped (zero) headers are never stale.',
