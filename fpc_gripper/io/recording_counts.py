@@ -1,4 +1,4 @@
-"""What a recording received, dropped and failed to write, and what those counts say."""
+"""What a recording received, lost, dropped and failed to write, and what those counts say."""
 
 import dataclasses
 import enum
@@ -11,6 +11,7 @@ class Health(enum.Enum):
 
     WRITES_FAILED = 'writes failed'
     QUEUE_FULL = 'queue full'
+    MESSAGES_LOST = 'messages lost'
     INVALID_STAMPS = 'invalid stamps'
     RECORDING = 'recording'
 
@@ -37,15 +38,19 @@ class HealthReport:
 
 class RecordingCounts:
     """
-    Per topic and in all: messages received and dropped, invalid stamps, failed writes.
+    Per topic and in all: messages received, lost and dropped, invalid stamps, failed writes.
 
+    Lost messages never reached the recorder: the middleware counts them (its
+    message-lost event), as when a reliable publisher's keep-last history moved on
+    before the recorder's reader had them, or a best-effort sample did not arrive.
     The counts of the writer thread (messages written, dropped because the queue was
     full, failed writes) are the `BackgroundWriter`'s, passed in where they are needed.
 
     Attributes
     ----------
     topics : dict of str to list of int
-        Per topic: [messages received, of them dropped because the queue was full].
+        Per topic: [messages received, of them dropped because the queue was full,
+        messages lost before the recorder].
     invalid_stamps : int
         Messages whose header stamp is not a valid time.
     refused : int
@@ -60,22 +65,31 @@ class RecordingCounts:
         self.invalid_stamps = 0
         self.refused = 0
         self.last_error = None
-        self._reported = (0, 0, 0)
+        self._reported = (0, 0, 0, 0)
 
     @property
     def received(self):
         """Messages received so far, over every topic."""
         return sum(counts[0] for counts in self.topics.values())
 
+    @property
+    def lost(self):
+        """Messages lost before the recorder so far, over every topic."""
+        return sum(counts[2] for counts in self.topics.values())
+
     def add_topic(self, topic):
         """Start counting a topic (a topic counted already keeps its counts)."""
-        self.topics.setdefault(topic, [0, 0])
+        self.topics.setdefault(topic, [0, 0, 0])
 
     def count(self, topic, dropped=False):
         """Count a message of `topic` received; `dropped` if the full queue dropped it."""
         counts = self.topics[topic]
         counts[0] += 1
         counts[1] += bool(dropped)
+
+    def lose(self, topic, count):
+        """Count `count` messages of `topic` that the middleware lost before the recorder."""
+        self.topics[topic][2] += count
 
     def write_failed(self, error):
         """Keep a failed write's exception for the diagnostics (called from the writer thread)."""
@@ -87,7 +101,8 @@ class RecordingCounts:
         self.write_failed(error)
 
     def _totals(self, background):
-        return background.dropped, self.invalid_stamps, background.errors + self.refused
+        return (background.dropped, self.lost, self.invalid_stamps,
+                background.errors + self.refused)
 
     def report(self, background):
         """
@@ -104,16 +119,22 @@ class RecordingCounts:
 
         """
         totals = self._totals(background)
-        dropped, invalid, errors = (now - before for now, before in zip(totals, self._reported))
+        dropped, lost, invalid, errors = (
+            now - before for now, before in zip(totals, self._reported))
         self._reported = totals
         if errors:
             message = f'{errors} writes failed: {self.last_error}'
             return HealthReport(Health.WRITES_FAILED, message,
-                                f'{message} ({totals[2]} lost so far)')
+                                f'{message} ({totals[3]} lost so far)')
         if dropped:
             message = f'{dropped} messages dropped: queue full'
             return HealthReport(Health.QUEUE_FULL, message,
                                 f'{message} ({totals[0]} so far; raise max_queue_mb)')
+        if lost:
+            message = f'{lost} messages lost before the recorder (counted by the middleware)'
+            return HealthReport(Health.MESSAGES_LOST, message,
+                                f'{message} ({totals[1]} so far; a publisher with keep-last '
+                                'history moved on, or best-effort samples did not arrive)')
         if invalid:
             return HealthReport(Health.INVALID_STAMPS, f'{invalid} header stamps not a valid '
                                                        'time (publish time = log time)')
@@ -125,14 +146,16 @@ class RecordingCounts:
 
         The totals are those of the last `report`; then one line per topic.
         """
-        dropped, invalid, failed = self._reported
+        dropped, lost, invalid, failed = self._reported
         values = {'file': str(path), 'messages received': self.received,
                   'messages written': background.written,
                   'queued': background.queued, 'queued bytes': background.queued_bytes,
-                  'dropped (queue full)': dropped, 'invalid stamps': invalid,
-                  'failed writes': failed, 'topics': len(self.topics)}
-        for topic, (received, full) in self.topics.items():
-            values[topic] = f'received {received}, dropped {full} (queue full)'
+                  'dropped (queue full)': dropped, 'lost before the recorder': lost,
+                  'invalid stamps': invalid, 'failed writes': failed,
+                  'topics': len(self.topics)}
+        for topic, (received, full, lost) in self.topics.items():
+            values[topic] = (f'received {received}, dropped {full} (queue full), '
+                             f'lost {lost} before the recorder')
         return {key: str(value) for key, value in values.items()}
 
     def summary(self, paths, written, dropped):
@@ -155,4 +178,5 @@ class RecordingCounts:
         failed = received - written - dropped
         return (f'closed {", ".join(str(p) for p in paths)}: received {received}, written '
                 f'{written}, dropped {dropped + failed} ({dropped} queue full, {failed} failed '
-                f'writes); {self.invalid_stamps} invalid header stamps')
+                f'writes); {self.lost} lost before the recorder (counted by the middleware); '
+                f'{self.invalid_stamps} invalid header stamps')

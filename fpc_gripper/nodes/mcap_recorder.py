@@ -7,6 +7,7 @@ import sys
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import SetParametersResult
 import rclpy
+from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.exceptions import InvalidHandle
 from rclpy.impl.implementation_singleton import rclpy_implementation
 from rclpy.node import Node
@@ -40,6 +41,7 @@ _DIAGNOSTICS_QOS = QoSProfile(depth=10, history=HistoryPolicy.KEEP_LAST,
                               reliability=ReliabilityPolicy.RELIABLE)
 _LEVELS = {Health.WRITES_FAILED: DiagnosticStatus.ERROR,
            Health.QUEUE_FULL: DiagnosticStatus.WARN,
+           Health.MESSAGES_LOST: DiagnosticStatus.WARN,
            Health.INVALID_STAMPS: DiagnosticStatus.WARN,
            Health.RECORDING: DiagnosticStatus.OK}
 
@@ -95,9 +97,11 @@ class McapRecorder(Node):
     header stamp that is not a valid time (negative seconds, nanoseconds past a second)
     is kept as it is in the payload while the record's publish time falls back to the
     log time; such stamps are counted (`invalid_stamps`). Messages dropped because the
-    queue was full (``max_queue_mb``) and failed writes are counted too, logged, and
-    reported on ``/diagnostics`` every ``diagnostics_period_s``, with what each topic
-    received and dropped.
+    queue was full (``max_queue_mb``), failed writes and messages the middleware lost
+    before the recorder had them (its message-lost event: a reliable publisher's
+    keep-last history moved on, or best-effort samples did not arrive) are counted too,
+    logged, and reported on ``/diagnostics`` every ``diagnostics_period_s``, with what
+    each topic received, dropped and lost.
     """
 
     def __init__(self, **kwargs):
@@ -192,9 +196,14 @@ class McapRecorder(Node):
         # serialised again, which for a 129-pose Path costs milliseconds per message.
         self._stamped[topic] = _starts_with_header(msg_class)
         self._counts.add_topic(topic)
+        # What the middleware lost before the reader had it is counted, not just missing.
+        # It counts losses after the reader matched the publisher: a transient-local
+        # reader that matches late starts from the publisher's history, and what that
+        # history no longer held is not counted.
+        lost = SubscriptionEventCallbacks(message_lost=functools.partial(self._on_lost, topic))
         self._subs[topic] = (self.create_subscription(
-            msg_class, topic, functools.partial(self._on_message, topic), qos, raw=True),
-            msg_class, qos)
+            msg_class, topic, functools.partial(self._on_message, topic), qos, raw=True,
+            event_callbacks=lost), msg_class, qos)
         self.get_logger().info(
             f'recording {topic} [{self._writer.topics[topic]}] '
             f'({qos.reliability.name.lower()}, {qos.durability.name.lower()})')
@@ -234,13 +243,16 @@ class McapRecorder(Node):
             self._counts.refuse(error)
         self._counts.count(topic, dropped)
 
+    def _on_lost(self, topic, status):
+        self._counts.lose(topic, status.total_count_change)
+
     def _report_health(self):
         if self._writer is None:
             return
         report = self._counts.report(self._background)
         if report.health is Health.WRITES_FAILED:
             self.get_logger().error(report.log)
-        elif report.health is Health.QUEUE_FULL:
+        elif report.health in (Health.QUEUE_FULL, Health.MESSAGES_LOST):
             self.get_logger().warning(report.log)
         if self._diagnostics_pub is None:
             return

@@ -1,4 +1,4 @@
-"""mcap_recorder with its executor stalled and a CPU hog: no probe sequence number is missing."""
+"""mcap_recorder stalled or stopped: nothing that reached it is missing, the rest is counted."""
 
 import pathlib
 import re
@@ -8,14 +8,18 @@ import subprocess
 import sys
 import time
 
+from diagnostic_msgs.msg import DiagnosticArray
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 from nav_msgs.msg import Path
 import pytest
 import rclpy
 from rclpy.duration import Duration
+from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from recorder_load import _Arc, start_hog, stop_hog
+
 
 from fpc_gripper.io.messages import serialized_shape, STATE_QOS
 
@@ -29,7 +33,12 @@ COUNT = 2000
 STALL_S = 3.0
 STOP_LINE = re.compile(
     r'closed .*: received (\d+), written (\d+), dropped (\d+) \((\d+) queue full, (\d+) '
-    r'failed writes\)')
+    r'failed writes\); (\d+) lost before the recorder')
+#: Reliable and transient-local like model_node's shapes, with a history that holds every
+#: message: the publisher never gives one up, so a message missing is the recorder's.
+EVERY_MESSAGE_QOS = QoSProfile(depth=COUNT, history=HistoryPolicy.KEEP_LAST,
+                               reliability=ReliabilityPolicy.RELIABLE,
+                               durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
 def probe_numbers(path):
@@ -54,12 +63,22 @@ def probe_numbers(path):
     return numbers
 
 
-def wait_for(condition, process, what, timeout=30.0):
+def wait_for(condition, process, what, timeout=30.0, executor=None):
     deadline = time.monotonic() + timeout
     while not condition():
         assert process.poll() is None, process.stdout.read().decode()
-        assert time.monotonic() < deadline, what
-        time.sleep(0.02)
+        assert time.monotonic() < deadline, what() if callable(what) else what
+        if executor is None:
+            time.sleep(0.02)
+        else:
+            executor.spin_once(timeout_sec=0.02)
+
+
+def stop_line(log):
+    """(received, written, dropped, queue full, failed writes, lost) of the one stop line."""
+    lines = [line for line in log.splitlines() if STOP_LINE.search(line)]
+    assert len(lines) == 1, log
+    return tuple(map(int, STOP_LINE.search(lines[0]).groups()))
 
 
 def test_a_stalled_recorder_keeps_every_message_of_a_reliable_topic(tmp_path):
@@ -67,9 +86,11 @@ def test_a_stalled_recorder_keeps_every_message_of_a_reliable_topic(tmp_path):
     Issue 22: 0 messages of a reliable topic missing from the recording, with a CPU hog.
 
     The probe publishes 2,000 shapes (129-pose Paths) numbered 0, 1, ... in their stamps,
-    at 500 Hz, on model_node's own QoS (reliable, keep-last 1: the publisher cannot send
-    one again), while the recorder's executor sleeps 3 s and a busy loop takes a core.
-    With the old keep-last-1000 subscription the reader overwrote its oldest 500.
+    at 500 Hz, reliable and with a history that holds them all, while the recorder's
+    executor sleeps 3 s and a busy loop takes a core. With the old keep-last-1000
+    subscription the reader overwrote its oldest 500. (With model_node's keep-last-1
+    history, a reader that falls behind in the middleware itself, as a hog can make it,
+    loses messages before the recorder; the next test shows those are counted.)
     """
     output = tmp_path / 'stalled.mcap'
     recorder = subprocess.Popen(
@@ -80,7 +101,7 @@ def test_a_stalled_recorder_keeps_every_message_of_a_reliable_topic(tmp_path):
     context = rclpy.Context()
     rclpy.init(context=context)
     probe = Node('stall_probe', context=context)
-    publisher = probe.create_publisher(Path, TOPIC, STATE_QOS)
+    publisher = probe.create_publisher(Path, TOPIC, EVERY_MESSAGE_QOS)
     arcs = [_Arc(5.0 + 0.01 * i) for i in range(50)]
     hogs = []
     try:
@@ -113,8 +134,93 @@ def test_a_stalled_recorder_keeps_every_message_of_a_reliable_topic(tmp_path):
     assert not missing, f'{len(missing)} of {COUNT} missing: {missing[:10]}...'
     assert got == list(range(COUNT))        # in order, none twice
 
-    lines = [line for line in log.splitlines() if STOP_LINE.search(line)]
-    assert len(lines) == 1, log
-    received, written, dropped, full, failed = map(int, STOP_LINE.search(lines[0]).groups())
+    received, written, dropped, full, failed, lost = stop_line(log)
     assert (received, written) == (COUNT, len(got))
-    assert (dropped, full, failed) == (0, 0, 0)
+    assert (dropped, full, failed, lost) == (0, 0, 0, 0)
+
+
+def diagnostics_values(array):
+    """The recorder's diagnostics key/values, as a dict."""
+    (status,) = array.status
+    return {value.key: value.value for value in status.values}
+
+
+def test_messages_lost_before_a_stopped_recorder_are_counted_and_named(tmp_path):
+    """
+    What the middleware loses before the recorder has it is counted: one number per loss.
+
+    The probe publishes 600 numbered shapes on model_node's own QoS (reliable, keep-last
+    1: it keeps only its newest). After the first is acknowledged, the whole recorder
+    process is stopped (SIGSTOP: its middleware threads too) while 400 are published,
+    then continued. Its socket buffers hold a few; the rest are gone from the publisher's
+    history before the reader can ask for them. The recorder's count of them, on
+    /diagnostics and in its stop line, must equal the numbers missing from the file.
+    """
+    count, stopped = 600, 400
+    output = tmp_path / 'stopped.mcap'
+    recorder = subprocess.Popen(
+        [sys.executable, '-m', 'fpc_gripper.nodes.mcap_recorder', '--ros-args', '-p',
+         f'output_path:={output}', '-p', f'topics:=[{TOPIC!r}]', '-p', 'flush_period_s:=0.2',
+         '-p', 'discovery_period_s:=0.1', '-p', 'diagnostics_period_s:=0.2'],
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    probe = Node('lost_probe', context=context)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(probe)
+    publisher = probe.create_publisher(Path, TOPIC, STATE_QOS)
+    latest = {}
+    probe.create_subscription(DiagnosticArray, '/diagnostics',
+                              lambda array: latest.update(diagnostics_values(array)), 10)
+    arcs = [_Arc(5.0 + 0.01 * i) for i in range(50)]
+
+    def publish(i):
+        publisher.publish(serialized_shape(arcs[i % 50], 'finger_0', BASE + i))
+
+    def accounted():
+        return ('messages received' in latest
+                and int(latest['messages received']) + int(latest['lost before the recorder'])
+                == count)
+
+    try:
+        wait_for(lambda: publisher.get_subscription_count() == 1, recorder,
+                 'the recorder never subscribed')
+        publish(0)
+        # Acknowledged: the recorder's reader has matched the publisher, and has message 0.
+        assert publisher.wait_for_all_acked(Duration(seconds=30.0))
+        recorder.send_signal(signal.SIGSTOP)
+        try:
+            for i in range(1, stopped + 1):
+                publish(i)
+                time.sleep(0.001)
+        finally:
+            recorder.send_signal(signal.SIGCONT)
+        for i in range(stopped + 1, count):
+            publish(i)
+            time.sleep(0.002)
+        assert publisher.wait_for_all_acked(Duration(seconds=30.0))
+        wait_for(accounted, recorder, lambda: f'the diagnostics never accounted for {count} '
+                 f'messages: {latest}', executor=executor)
+        recorder.send_signal(signal.SIGINT)
+        code = recorder.wait(timeout=30.0)
+    finally:
+        if recorder.poll() is None:
+            recorder.send_signal(signal.SIGCONT)
+            recorder.kill()
+            recorder.wait()
+        executor.shutdown()
+        probe.destroy_node()
+        rclpy.try_shutdown(context=context)
+    log = recorder.stdout.read().decode()
+    assert code == 0, log
+
+    got = probe_numbers(output)
+    missing = sorted(set(range(count)) - set(got))
+    assert got == sorted(got)       # in order, none twice
+    assert missing and set(missing) <= set(range(1, stopped + 1)), missing
+    received, written, dropped, _, _, lost = stop_line(log)
+    assert lost == len(missing) == int(latest['lost before the recorder']), log
+    assert received == written == len(got) == count - lost and dropped == 0
+    assert latest[TOPIC] == (f'received {count - lost}, dropped 0 (queue full), lost {lost} '
+                             'before the recorder')
+    assert f'{lost} messages lost before the recorder' in log, log

@@ -19,9 +19,12 @@ def test_messages_are_counted_per_topic_and_in_all():
     for dropped in (False, True, False):
         counts.count('/a', dropped)
     counts.count('/b')
+    counts.lose('/b', 5)
     counts.add_topic('/a')          # a topic subscribed again keeps its counts
-    assert counts.topics == {'/a': [3, 1], '/b': [1, 0]}
+    counts.lose('/b', 2)
+    assert counts.topics == {'/a': [3, 1, 0], '/b': [1, 0, 7]}
     assert counts.received == 4
+    assert counts.lost == 7
 
 
 def test_the_report_says_the_worst_since_the_last_one():
@@ -35,8 +38,15 @@ def test_the_report_says_the_worst_since_the_last_one():
     report = counts.report(background(dropped=5))
     assert report.health is Health.QUEUE_FULL
     assert report.log == '5 messages dropped: queue full (5 so far; raise max_queue_mb)'
+    counts.add_topic('/a')
+    counts.lose('/a', 4)
     report = counts.report(background(dropped=7))
     assert report.message == '2 messages dropped: queue full'
+    counts.lose('/a', 3)
+    report = counts.report(background(dropped=7))
+    assert report.health is Health.MESSAGES_LOST
+    assert report.message == '3 messages lost before the recorder (counted by the middleware)'
+    assert report.log.startswith(f'{report.message} (7 so far; ')
     assert counts.report(background(dropped=7)).health is Health.RECORDING
 
 
@@ -57,14 +67,16 @@ def test_the_diagnostics_values_are_the_reported_totals_and_every_topic():
     counts = RecordingCounts()
     counts.add_topic('/a')
     counts.count('/a', dropped=True)
+    counts.lose('/a', 6)
     counts.invalid_stamps = 1
     counts.report(background(dropped=1, errors=2, written=0))
+    counts.lose('/a', 1)            # after the report: in the topic's line only
     values = counts.values('/tmp/x.mcap', background(dropped=9, written=4))
     assert values == {'file': '/tmp/x.mcap', 'messages received': '1',
                       'messages written': '4', 'queued': '2', 'queued bytes': '300',
-                      'dropped (queue full)': '1', 'invalid stamps': '1',
-                      'failed writes': '2', 'topics': '1',
-                      '/a': 'received 1, dropped 1 (queue full)'}
+                      'dropped (queue full)': '1', 'lost before the recorder': '6',
+                      'invalid stamps': '1', 'failed writes': '2', 'topics': '1',
+                      '/a': 'received 1, dropped 1 (queue full), lost 7 before the recorder'}
 
 
 def test_the_closing_line_counts_what_was_neither_written_nor_dropped_as_failed():
@@ -72,7 +84,9 @@ def test_the_closing_line_counts_what_was_neither_written_nor_dropped_as_failed(
     counts.add_topic('/a')
     for _ in range(10):
         counts.count('/a')
+    counts.lose('/a', 2)
     counts.invalid_stamps = 3
     line = counts.summary(['/tmp/x_0.mcap', '/tmp/x_1.mcap'], written=6, dropped=1)
     assert line == ('closed /tmp/x_0.mcap, /tmp/x_1.mcap: received 10, written 6, dropped 4 '
-                    '(1 queue full, 3 failed writes); 3 invalid header stamps')
+                    '(1 queue full, 3 failed writes); 2 lost before the recorder (counted by '
+                    'the middleware); 3 invalid header stamps')
