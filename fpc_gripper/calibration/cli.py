@@ -3,6 +3,7 @@
 import argparse
 import sys
 
+from fpc_gripper.model.validation import STANDARD_ATMOSPHERE
 from fpc_gripper.progress import Progress
 from fpc_gripper.tools import add_version, OutputDir, run
 from .data import DataError, read_loading, read_markers, read_markers_mcap, read_tensile
@@ -95,7 +96,7 @@ def _parser():
                       help='geometry_msgs/PoseArray topic (default /mocap/markers)')
     mcap.add_argument('--pressure-topic', default='/finger_0/pressure',
                       help='sensor_msgs/FluidPressure topic (default /finger_0/pressure)')
-    mcap.add_argument('--atmospheric-pressure', type=float, default=101325.0,
+    mcap.add_argument('--atmospheric-pressure', type=float, default=STANDARD_ATMOSPHERE,
                       help='absolute - gauge [Pa] (default 101325)')
     return add_version(p)
 

@@ -7,6 +7,8 @@ import pathlib
 
 import numpy as np
 
+from fpc_gripper.model.validation import STANDARD_ATMOSPHERE
+
 __all__ = ['DataError', 'MarkerData', 'LoadingData', 'TensileData', 'read_markers',
            'read_loading', 'read_tensile', 'read_markers_mcap', 'MARKER_COLUMNS',
            'LOADING_COLUMNS', 'TENSILE_COLUMNS']
@@ -362,7 +364,8 @@ def read_tensile(path, design=None):
 
 
 def read_markers_mcap(path, marker_s, markers_topic, pressure_topic, design=None,
-                      atmospheric_pressure=101325.0, pressure_tolerance=1.0e3, min_samples=5):
+                      atmospheric_pressure=STANDARD_ATMOSPHERE, pressure_tolerance=1.0e3,
+                      min_samples=5):
     """
     Read marker frames from an MCAP recording (rosbag2 profile, CDR).
 

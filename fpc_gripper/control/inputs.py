@@ -2,6 +2,7 @@
 
 import math
 
+from fpc_gripper.model.validation import STANDARD_ATMOSPHERE
 from fpc_gripper.services.input_limits import check_absolute_pressure
 from fpc_gripper.services.input_limits import check_frame
 from fpc_gripper.services.input_limits import check_tip_force_value
@@ -40,7 +41,8 @@ class ControllerInputs:
 
     """
 
-    def __init__(self, law, frames, atmospheric_pressure=101325.0, bounds=DEFAULT_BOUNDS):
+    def __init__(self, law, frames, atmospheric_pressure=STANDARD_ATMOSPHERE,
+                 bounds=DEFAULT_BOUNDS):
         self.law = law
         self.frames = tuple(frames)
         if len(self.frames) != len(law.models):

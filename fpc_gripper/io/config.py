@@ -7,7 +7,9 @@ import pathlib
 import re
 
 from fpc_gripper.model import ActuatorDesign
+from fpc_gripper.model.validation import ATMOSPHERIC_RANGE
 from fpc_gripper.model.validation import DESIGN_BOUNDS
+from fpc_gripper.model.validation import STANDARD_ATMOSPHERE
 from fpc_gripper.safe_yaml import load_yaml
 from fpc_gripper.safe_yaml import Where
 
@@ -23,9 +25,6 @@ MAX_NAME_CHARS = 64
 _NAME = re.compile(r'[A-Za-z][A-Za-z0-9_]*\Z')
 _TOP_KEYS = {'actuator', 'palm_radius', 'atmospheric_pressure', 'max_pressure', 'fingers'}
 _FINGER_KEYS = {'name', 'mount_angle', 'design'}
-#: Atmospheric pressure anywhere people work, from 9 km up to below sea level [Pa]: the
-#: range of the nodes' `atmospheric_pressure` parameter.
-ATMOSPHERIC_RANGE = (3.0e4, 1.2e5)
 #: Largest palm radius [m].
 MAX_PALM_RADIUS = 1.0
 
@@ -166,5 +165,5 @@ def load_gripper_config(path=None):
         max_pressure=(where / 'max_pressure').number(
             data.get('max_pressure', 400e3), '[Pa]', *DESIGN_BOUNDS.max_pressure),
         atmospheric_pressure=(where / 'atmospheric_pressure').number(
-            data.get('atmospheric_pressure', 101325.0), '[Pa]', *ATMOSPHERIC_RANGE),
+            data.get('atmospheric_pressure', STANDARD_ATMOSPHERE), '[Pa]', *ATMOSPHERIC_RANGE),
         source=source)

@@ -13,6 +13,8 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from std_msgs.msg import ColorRGBA, Float64
 from visualization_msgs.msg import Marker
 
+from fpc_gripper.model.validation import STANDARD_ATMOSPHERE
+
 __all__ = [
     'DEFAULT_ATMOSPHERIC_PRESSURE', 'FINGER_TOPICS', 'GRIPPER_TOPICS', 'MODEL_OUTPUT_TYPES',
     'STATE_QOS',
@@ -26,7 +28,7 @@ STATE_QOS = QoSProfile(depth=1, history=HistoryPolicy.KEEP_LAST,
                        reliability=ReliabilityPolicy.RELIABLE,
                        durability=DurabilityPolicy.TRANSIENT_LOCAL)
 #: Standard atmosphere, the default for absolute-to-gauge conversion [Pa].
-DEFAULT_ATMOSPHERIC_PRESSURE = 101325.0
+DEFAULT_ATMOSPHERIC_PRESSURE = STANDARD_ATMOSPHERE
 #: Per-finger topics, relative to the node namespace, under ``finger_<i>/``.
 FINGER_TOPICS = ('pressure_command', 'pressure', 'tip_force', 'shape', 'curvature',
                  'rigidity')

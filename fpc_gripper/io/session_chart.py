@@ -2,6 +2,8 @@
 
 import math
 
+from fpc_gripper.model.validation import STANDARD_ATMOSPHERE
+
 __all__ = ['make_chart', 'message_count']
 
 
@@ -38,7 +40,7 @@ def _series(mcap_path, atmospheric):
     return data
 
 
-def make_chart(mcap_path, png_path, phases, grasp_force, atmospheric=101325.0):
+def make_chart(mcap_path, png_path, phases, grasp_force, atmospheric=STANDARD_ATMOSPHERE):
     """
     Chart aperture, pressures, curvatures and contact forces against time from the MCAP.
 

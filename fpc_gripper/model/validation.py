@@ -10,7 +10,14 @@ from ..safe_yaml import brief
 __all__ = ['ArgumentError', 'arc_lengths', 'DESIGN_BOUNDS', 'DesignBounds', 'ENVELOPE',
            'InputLimits', 'UNIQUE_LOAD', 'check_force', 'check_interval', 'check_load',
            'real_number', 'real_pair', 'warm_start_allowed', 'check_pressure_model',
-           'PRESSURE_MODELS', 'PRESSURE_MODEL_NAMES', 'OUTPUT_LEVELS', 'check_outputs']
+           'PRESSURE_MODELS', 'PRESSURE_MODEL_NAMES', 'OUTPUT_LEVELS', 'check_outputs',
+           'ATMOSPHERIC_RANGE', 'STANDARD_ATMOSPHERE']
+
+#: Standard atmosphere [Pa]: the default of every absolute-to-gauge conversion.
+STANDARD_ATMOSPHERE = 101325.0
+#: Atmospheric pressure anywhere people work, from 9 km up to below sea level [Pa]: the
+#: range of a configured atmospheric pressure.
+ATMOSPHERIC_RANGE = (3.0e4, 1.2e5)
 
 #: Pressure-work coefficient k_p of Pi_P = -k_p P V by name (SPEC "Pressure work"):
 #: 1/(gamma - 1) with gamma = 1.4, exactly 2.5 (1/(1.4 - 1) rounds to 2.5000000000000004).

@@ -3,6 +3,7 @@
 import dataclasses
 import math
 
+from fpc_gripper.model.validation import STANDARD_ATMOSPHERE
 from fpc_gripper.regulators.base import BackendFault
 from fpc_gripper.regulators.safety import ChannelSupervisor
 from fpc_gripper.regulators.safety import MonotonicTime
@@ -48,7 +49,7 @@ class MonitorSettings:
     tracking_timeout_s: float = 2.0
     overpressure_margin_pa: float = 5.0e4
     reconnect_interval_s: float = 1.0
-    atmospheric_pressure: float = 101325.0
+    atmospheric_pressure: float = STANDARD_ATMOSPHERE
 
     def __post_init__(self):
         for field in dataclasses.fields(self):

@@ -6,10 +6,12 @@ import math
 import numbers
 
 from fpc_gripper.model.validation import ArgumentError
+from fpc_gripper.model.validation import ATMOSPHERIC_RANGE
 from fpc_gripper.model.validation import check_force
 from fpc_gripper.model.validation import ENVELOPE
 from fpc_gripper.model.validation import InputLimits
 from fpc_gripper.model.validation import integer
+from fpc_gripper.model.validation import STANDARD_ATMOSPHERE
 from fpc_gripper.services.logs import bounded
 
 __all__ = ['BOUND_NAMES', 'DEFAULT_BOUNDS', 'InputBounds', 'InputCheck', 'MAX_STAMP_NS',
@@ -183,9 +185,9 @@ def atmospheric_pressure_row():
     Every node that converts between absolute pressures on its topics and gauge pressures
     declares it so.
     """
-    return ('atmospheric_pressure', 101325.0,
+    return ('atmospheric_pressure', STANDARD_ATMOSPHERE,
             'Atmospheric pressure [Pa]: gauge = absolute - atmospheric_pressure.',
-            {'floating_point_range': (3.0e4, 1.2e5)})
+            {'floating_point_range': ATMOSPHERIC_RANGE})
 
 
 def checked_bounds(bounds, frames=()):

@@ -6,6 +6,7 @@ import time
 import numpy as np
 
 from fpc_gripper.model.pipeline import model_label
+from fpc_gripper.model.validation import STANDARD_ATMOSPHERE
 from fpc_gripper.services.finger_state import check_pressure
 from fpc_gripper.services.finger_state import check_tip_force
 from fpc_gripper.services.finger_state import FingerState
@@ -78,7 +79,7 @@ class ModelCore:
     """
 
     def __init__(self, fingers, solver_factory, *, max_pressure=math.inf,
-                 atmospheric_pressure=101325.0, stale_after_s=0.0, max_rate_hz=200.0,
+                 atmospheric_pressure=STANDARD_ATMOSPHERE, stale_after_s=0.0, max_rate_hz=200.0,
                  frame_prefix='', timer=time.perf_counter, future_limit_s=0.0,
                  bounds=DEFAULT_BOUNDS):
         self._states = tuple(
