@@ -1,17 +1,11 @@
 """Raw input subscriptions of the nodes: payload size bound, guarded decoding, lost messages."""
 
 from geometry_msgs.msg import WrenchStamped
-from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
-from rclpy.clock import Clock
-from rclpy.clock import ClockType
-from rclpy.event_handler import EventHandler
-from rclpy.event_handler import QoSSubscriptionEventType
-from rclpy.event_handler import UnsupportedEventTypeError
-from rclpy.exceptions import InvalidHandle
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import FluidPressure
 
 from fpc_gripper.io import cdr
+from fpc_gripper.nodes.lost_messages import LostMessages
 from fpc_gripper.services.input_limits import DEFAULT_BOUNDS
 from fpc_gripper.services.input_limits import InputCheck
 from fpc_gripper.services.input_limits import Rejection
@@ -21,8 +15,6 @@ __all__ = ['InputGuard', 'decode']
 
 # Characters of a deserialiser's error kept in a rejection.
 _ERROR_CHARS = 160
-#: How often the lost-message counts are read [s] (steady time, also under use_sim_time).
-LOST_POLL_PERIOD_S = 0.5
 #: Per-command inputs decoded by struct (a tenth of rclpy's time); what these decline, and
 #: every other type, goes through rclpy's decoder.
 _FAST_DECODERS = {FluidPressure: cdr.fluid_pressure, WrenchStamped: cdr.wrench_stamped}
@@ -80,15 +72,8 @@ class InputGuard:
     the middleware lost. Through the guard each payload is size-checked and decoded by
     `decode`; a refused one goes to ``on_reject`` (with its `InputCheck`), and every
     lost-message count of the subscription to ``on_lost`` (with the count), so the node
-    reports them in its diagnostics.
-
-    The counts are read every `LOST_POLL_PERIOD_S`, not delivered as events. An event
-    handler in the node would be armed by rclpy's EventsExecutor, and rmw_fastrtps (the
-    Jazzy wheels) then takes its event mutex and the DataReader's mutex in opposite orders
-    on the executor thread and on the DDS thread that reports the loss: the process
-    deadlocks under message loss (seen in a soak after 9 minutes of injected bursts;
-    upstream ros2/rmw_fastrtps#890). Unarmed, Fast DDS still counts the losses, and a take
-    reads them.
+    reports them in its diagnostics. The counts are polled (`LostMessages`), never
+    delivered by an executor-armed event, which deadlocks under loss.
 
     Parameters
     ----------
@@ -102,8 +87,7 @@ class InputGuard:
         self.decoded = 0
         self.refused = 0
         self.lost = 0
-        self._lost_events = []
-        self._poll_timer = None
+        self._lost = LostMessages()
 
     def subscribe(self, node, msg_type, topic, qos, on_message, on_reject, on_lost=None):
         """
@@ -143,41 +127,15 @@ class InputGuard:
             on_lost(count)
 
         subscription = node.create_subscription(msg_type, topic, callback, qos, raw=True)
-        if on_lost is None:
-            return subscription
-        try:
-            # Neither the node's waitable nor in its callback groups, so no executor arms
-            # it (see the class notes).
-            event = EventHandler(
-                callback_group=MutuallyExclusiveCallbackGroup(), callback=None,
-                event_type=QoSSubscriptionEventType.RCL_SUBSCRIPTION_MESSAGE_LOST,
-                parent_impl=subscription.handle)
-        except UnsupportedEventTypeError:
-            # A middleware without the event: the inputs are still guarded.
-            return subscription
-        self._lost_events.append((event, lost))
-        if self._poll_timer is None:
-            self._poll_timer = node.create_timer(
-                LOST_POLL_PERIOD_S, self.poll_lost, clock=Clock(clock_type=ClockType.STEADY_TIME))
+        if on_lost is not None:
+            # A middleware without the event watches nothing: the inputs are still guarded.
+            self._lost.watch(node, subscription, lost)
         return subscription
 
     def poll_lost(self):
         """Read every guarded subscription's lost-message count; ``on_lost`` for each > 0."""
-        for entry in tuple(self._lost_events):
-            event, lost = entry
-            # take_data takes only what a wait set said was ready; here nothing waits.
-            event._ready_to_take_data = True
-            try:
-                info = event.take_data()
-            except InvalidHandle:
-                self._lost_events.remove(entry)
-                continue
-            count = 0 if info is None else int(info.total_count_change)
-            if count > 0:
-                lost(count)
+        self._lost.poll()
 
     def close(self):
         """Destroy the lost-message handles (before their node: they hold its subscriptions)."""
-        for event, _ in self._lost_events:
-            event.destroy()
-        self._lost_events.clear()
+        self._lost.close()

@@ -7,12 +7,12 @@ import sys
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import SetParametersResult
 import rclpy
-from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.exceptions import InvalidHandle
 from rclpy.impl.implementation_singleton import rclpy_implementation
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
+from .lost_messages import LostMessages
 from .parameters import declare_table
 from .runner import run_node
 from ..io.cdr import header_stamp, INVALID_STAMP
@@ -110,6 +110,7 @@ class McapRecorder(Node):
         self._background = None
         self._subs = {}
         self._counts = RecordingCounts()
+        self._lost = LostMessages()
         self._stamped = {}
         self._params = {}
         self._diagnostics_pub = None
@@ -196,14 +197,13 @@ class McapRecorder(Node):
         # serialised again, which for a 129-pose Path costs milliseconds per message.
         self._stamped[topic] = _starts_with_header(msg_class)
         self._counts.add_topic(topic)
+        subscription = self.create_subscription(
+            msg_class, topic, functools.partial(self._on_message, topic), qos, raw=True)
+        self._subs[topic] = (subscription, msg_class, qos)
         # What the middleware lost before the reader had it is counted, not just missing.
-        # It counts losses after the reader matched the publisher: a transient-local
-        # reader that matches late starts from the publisher's history, and what that
-        # history no longer held is not counted.
-        lost = SubscriptionEventCallbacks(message_lost=functools.partial(self._on_lost, topic))
-        self._subs[topic] = (self.create_subscription(
-            msg_class, topic, functools.partial(self._on_message, topic), qos, raw=True,
-            event_callbacks=lost), msg_class, qos)
+        # It counts from the reader's match with a publisher: what a late transient-local
+        # reader never saw of the publisher's past is no loss.
+        self._lost.watch(self, subscription, functools.partial(self._counts.lose, topic))
         self.get_logger().info(
             f'recording {topic} [{self._writer.topics[topic]}] '
             f'({qos.reliability.name.lower()}, {qos.durability.name.lower()})')
@@ -218,6 +218,7 @@ class McapRecorder(Node):
             or (qos.durability == DurabilityPolicy.TRANSIENT_LOCAL
                 and wanted.durability != DurabilityPolicy.TRANSIENT_LOCAL))
         if stricter:
+            self._lost.forget(subscription)
             self.destroy_subscription(subscription)
             self._subscribe(topic, msg_class, wanted)
 
@@ -242,9 +243,6 @@ class McapRecorder(Node):
         except McapWriterError as error:
             self._counts.refuse(error)
         self._counts.count(topic, dropped)
-
-    def _on_lost(self, topic, status):
-        self._counts.lose(topic, status.total_count_change)
 
     def _report_health(self):
         if self._writer is None:
@@ -302,6 +300,7 @@ class McapRecorder(Node):
                 if taken is None:
                     break
                 self._on_message(topic, taken[0])
+        self._lost.poll()
         writer, self._writer = self._writer, None
         background, self._background = self._background, None
         background.close()
@@ -311,8 +310,9 @@ class McapRecorder(Node):
         logger.info(self._counts.summary(writer.paths, writer.message_count, background.dropped))
 
     def destroy_node(self):
-        """Close the recording, then destroy the node."""
+        """Close the recording and the lost-message handles, then destroy the node."""
         self.close()
+        self._lost.close()
         return super().destroy_node()
 
 

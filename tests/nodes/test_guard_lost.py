@@ -13,7 +13,7 @@ from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import FluidPressure
 
 from fpc_gripper.nodes.guard import InputGuard
-from fpc_gripper.nodes.guard import LOST_POLL_PERIOD_S
+from fpc_gripper.nodes.lost_messages import LOST_POLL_PERIOD_S
 from fpc_gripper.nodes.model_node import ModelNode
 from fpc_gripper.nodes.runner import make_executor
 
@@ -105,3 +105,25 @@ def test_lost_messages_are_counted_while_the_executor_keeps_running(context):
         guard.close()
         executor.shutdown()
         node.destroy_node()
+
+
+def test_the_recorder_arms_no_lost_message_event(context, tmp_path):
+    # The recorder counts losses too (its stop line), through the same poll.
+    from rclpy.parameter import Parameter
+
+    from fpc_gripper.nodes.mcap_recorder import McapRecorder
+    publisher_node = rclpy.create_node('guard_arms_publisher', context=context)
+    publisher_node.create_publisher(FluidPressure, TOPIC, 1)
+    recorder = McapRecorder(context=context, parameter_overrides=[
+        Parameter('output_path', value=str(tmp_path / 'r.mcap')),
+        Parameter('topics', value=[TOPIC])])
+    try:
+        deadline = time.monotonic() + 10.0
+        while not recorder.recorded_topics and time.monotonic() < deadline:
+            recorder._discover()
+            time.sleep(0.05)
+        assert recorder.recorded_topics == [TOPIC]
+        assert _armed_handlers(recorder) == []
+    finally:
+        recorder.destroy_node()
+        publisher_node.destroy_node()
