@@ -47,6 +47,7 @@ import json
 import math
 import os
 import pathlib
+import re
 import signal
 import struct
 import subprocess
@@ -855,6 +856,21 @@ def format_table(rows, duration, rate):
 
 # -- the recording --------------------------------------------------------------------------
 
+#: The recorder's stop line (`RecordingCounts.summary`).
+_STOP_LINE = re.compile(
+    r'closed .*: received (?P<received>\d+), written (?P<written>\d+), dropped '
+    r'(?P<dropped>\d+) \((?P<queue_full>\d+) queue full, (?P<failed_writes>\d+) failed '
+    r'writes\); (?P<lost>\d+) lost before the recorder \(counted by the middleware\); '
+    r'(?P<invalid_stamps>\d+) invalid header stamps')
+
+
+def recorder_counts(log):
+    """The counts of the recorder's last stop line in a log, or None if it has none."""
+    matches = list(_STOP_LINE.finditer(log))
+    return {key: int(value) for key, value in matches[-1].groupdict().items()} \
+        if matches else None
+
+
 def read_recording(path, probe, junk=frozenset()):
     """
     Read the closed MCAP file: counts, a decoded sample, and the probe comparison.
@@ -1197,6 +1213,9 @@ class Soak:
                          'read_error': f'{type(exc).__name__}: {exc}'}
             if self.mcap_path.exists():
                 recording.update(count_readable(self.mcap_path))
+        recorder = self.procs.get('gripper' if args.composed else 'mcap_recorder')
+        recording['recorder'] = None if recorder is None else recorder_counts(
+            recorder.log_text())
         if not args.keep_mcap and self.mcap_path.exists():
             self.mcap_path.unlink()
             recording['deleted'] = True
@@ -1271,7 +1290,11 @@ def _recording_text(rec):
                 f'from its start, then {rec.get("error") or "its end"}')
     missing = {t: c['missing_from_recording'] for t, c in rec['comparison'].items()
                if c['missing_from_recording']}
-    return (f'{rec["size_mib"]:.1f} MiB, closed {rec["closed"]}, {rec["iterated_count"]} '
+    counts = rec.get('recorder')
+    stop = ('no stop line from the recorder' if counts is None else
+            "the recorder's stop line: {received} received, {written} written, {dropped} "
+            'dropped, {lost} lost before it'.format(**counts))
+    return (f'{stop}; {rec["size_mib"]:.1f} MiB, closed {rec["closed"]}, {rec["iterated_count"]} '
             f'messages iterated (summary {rec["summary_count"]}), {rec["decoded"]} decoded, '
             f'{rec["decode_failures"]} failures ({rec["junk_sampled"]} of the soak\'s own junk '
             f'payloads among the sampled); probe messages missing from it: '

@@ -15,9 +15,11 @@ from sensor_msgs.msg import FluidPressure
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / 'bench'))
 from soak import cdr_fluid_pressure, cdr_header, LatencyTracker, NS  # noqa: E402, I100
-from soak import read_recording, slope_per_hour, SpilledArray  # noqa: E402
+from soak import read_recording, recorder_counts, slope_per_hour  # noqa: E402
+from soak import SpilledArray  # noqa: E402
 
 from fpc_gripper.io.mcap_writer import Rosbag2McapWriter  # noqa: E402
+from fpc_gripper.io.recording_counts import RecordingCounts  # noqa: E402
 
 
 def _pressure(sec, nanosec, frame, value):
@@ -156,3 +158,20 @@ def test_rss_slopes_least_squares_and_theil_sen():
     holes[::7] = np.nan
     assert slope_per_hour(t, holes, robust=True) == pytest.approx(1.0, rel=1e-9)
     assert math.isnan(slope_per_hour(t[:2], rss[:2], robust=True))
+
+
+def test_the_recorders_stop_line_is_read_from_its_log():
+    # The line the recorder writes (RecordingCounts.summary), among other log lines: the
+    # soak reads the last one, and says so when there is none.
+    counts = RecordingCounts()
+    counts.add_topic('/a')
+    for _ in range(12):
+        counts.count('/a')
+    counts.lose('/a', 5)
+    counts.invalid_stamps = 1
+    line = counts.summary(['/tmp/s.mcap'], written=9, dropped=2)
+    log = f'[INFO] recording 1 topics\n[INFO] [mcap_recorder]: {line}\n[INFO] done\n'
+    assert recorder_counts(log) == {'received': 12, 'written': 9, 'dropped': 3,
+                                    'queue_full': 2, 'failed_writes': 1, 'lost': 5,
+                                    'invalid_stamps': 1}
+    assert recorder_counts('[INFO] recording 1 topics\n') is None
