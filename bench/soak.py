@@ -891,6 +891,7 @@ def read_recording(path, probe, junk=frozenset()):
     decode = DecoderFactory()
     decoders = {}
     sampled = collections.Counter()
+    failures = []
     last = {}
     stride = 997
     wanted = {f'/{f}/{t}': (t, f) for t, f in probe.received}
@@ -906,14 +907,16 @@ def read_recording(path, probe, junk=frozenset()):
             if topic in wanted and message.publish_time != message.log_time:
                 stamps[topic].append(message.publish_time)
             if counts[topic] % stride == 1:
-                sampled[_decode(decoders, decode, schema, channel, message, junk)] += 1
+                sampled[_decode(decoders, decode, schema, channel, message, junk,
+                                failures)] += 1
             last[topic] = (schema, channel, message)
     for schema, channel, message in last.values():
-        sampled[_decode(decoders, decode, schema, channel, message, junk)] += 1
+        sampled[_decode(decoders, decode, schema, channel, message, junk, failures)] += 1
     out['iterated_count'] = sum(counts.values())
     out['decoded'] = sampled['decoded']
     out['decode_failures'] = sampled['failure']
     out['junk_sampled'] = sampled['junk']
+    out['decode_failure_examples'] = failures
     out['topics'] = dict(sorted(counts.items()))
     comparison = {}
     probed, missing = [], []
@@ -960,15 +963,27 @@ def count_readable(path):
     return {'readable_count': count, 'error': error}
 
 
-def _decode(decoders, factory, schema, channel, message, junk=frozenset()):
-    """Decode one message: 'decoded', 'junk' (one of the soak's own, undecodable) or 'failure'."""
+def _decode(decoders, factory, schema, channel, message, junk=frozenset(), failures=None):
+    """
+    Decode one message: 'decoded', 'junk' (one of the soak's own, undecodable) or 'failure'.
+
+    A failure is described in `failures` (a list, up to 10 entries): topic, log time,
+    size, the first bytes and the error, so a failed run says what it could not read.
+    """
     try:
         if channel.id not in decoders:
             decoders[channel.id] = factory.decoder_for(channel.message_encoding, schema)
         decoders[channel.id](message.data)
         return 'decoded'
-    except Exception:  # noqa: BLE001 - any failure to decode counts as one
-        return 'junk' if bytes(message.data) in junk else 'failure'
+    except Exception as exc:  # noqa: BLE001 - any failure to decode counts as one
+        data = bytes(message.data)
+        if data in junk:
+            return 'junk'
+        if failures is not None and len(failures) < 10:
+            failures.append({'topic': channel.topic, 'log_time': message.log_time,
+                             'size': len(data), 'head': data[:24].hex(),
+                             'error': f'{type(exc).__name__}: {exc}'[:300]})
+        return 'failure'
 
 
 # -- chart ----------------------------------------------------------------------------------
@@ -1298,7 +1313,10 @@ def _recording_text(rec):
             f'messages iterated (summary {rec["summary_count"]}), {rec["decoded"]} decoded, '
             f'{rec["decode_failures"]} failures ({rec["junk_sampled"]} of the soak\'s own junk '
             f'payloads among the sampled); probe messages missing from it: '
-            f'{missing or "none"} of {sum(c["probe"] for c in rec["comparison"].values())}')
+            f'{missing or "none"} of {sum(c["probe"] for c in rec["comparison"].values())}'
+            + ''.join(f'\n  undecodable: {f["topic"]} at log time {f["log_time"]}, {f["size"]} '
+                      f'bytes ({f["head"]}...): {f["error"]}'
+                      for f in rec.get('decode_failure_examples', ())))
 
 
 def write_csv(path, samples, names):

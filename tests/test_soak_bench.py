@@ -134,6 +134,10 @@ def test_the_recording_check_counts_the_soaks_own_junk_apart_from_a_failure(tmp_
     probe = types.SimpleNamespace(received={}, t0_ns=0)
     out = read_recording(path, probe, junk={junk, b''})
     assert (out['decoded'], out['junk_sampled'], out['decode_failures']) == (2, 2, 2)
+    # Each failure says what it was: the corrupt message, twice (first and last of its topic).
+    assert [(f['topic'], f['log_time'], f['size']) for f in out['decode_failure_examples']] \
+        == [('/corrupt', NS + 2, len(corrupt))] * 2
+    assert out['decode_failure_examples'][0]['head'] == corrupt[:24].hex()
     # Without the soak's list, its junk is a failure like any other.
     out = read_recording(path, probe)
     assert (out['decoded'], out['junk_sampled'], out['decode_failures']) == (2, 0, 4)

@@ -74,6 +74,15 @@ def wait_for(condition, process, what, timeout=30.0, executor=None):
             executor.spin_once(timeout_sec=0.02)
 
 
+def start_recorder(command, output, diagnostics_period_s):
+    """Start a recorder process of `command` (argv up to --ros-args) on TOPIC to `output`."""
+    return subprocess.Popen(
+        [*command, '--ros-args', '-p', f'output_path:={output}', '-p', f'topics:=[{TOPIC!r}]',
+         '-p', 'flush_period_s:=0.2', '-p', 'discovery_period_s:=0.1',
+         '-p', f'diagnostics_period_s:={diagnostics_period_s}'],
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+
+
 def stop_line(log):
     """(received, written, dropped, queue full, failed writes, lost) of the one stop line."""
     lines = [line for line in log.splitlines() if STOP_LINE.search(line)]
@@ -93,11 +102,7 @@ def test_a_stalled_recorder_keeps_every_message_of_a_reliable_topic(tmp_path):
     loses messages before the recorder; the next test shows those are counted.)
     """
     output = tmp_path / 'stalled.mcap'
-    recorder = subprocess.Popen(
-        [sys.executable, str(HELPER), str(STALL_S), '--ros-args', '-p',
-         f'output_path:={output}', '-p', f'topics:=[{TOPIC!r}]', '-p', 'flush_period_s:=0.2',
-         '-p', 'discovery_period_s:=0.1', '-p', 'diagnostics_period_s:=0.0'],
-        stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+    recorder = start_recorder([sys.executable, str(HELPER), str(STALL_S)], output, 0.0)
     context = rclpy.Context()
     rclpy.init(context=context)
     probe = Node('stall_probe', context=context)
@@ -158,11 +163,8 @@ def test_messages_lost_before_a_stopped_recorder_are_counted_and_named(tmp_path)
     """
     count, stopped = 600, 400
     output = tmp_path / 'stopped.mcap'
-    recorder = subprocess.Popen(
-        [sys.executable, '-m', 'fpc_gripper.nodes.mcap_recorder', '--ros-args', '-p',
-         f'output_path:={output}', '-p', f'topics:=[{TOPIC!r}]', '-p', 'flush_period_s:=0.2',
-         '-p', 'discovery_period_s:=0.1', '-p', 'diagnostics_period_s:=0.2'],
-        stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+    recorder = start_recorder([sys.executable, '-m', 'fpc_gripper.nodes.mcap_recorder'],
+                              output, 0.2)
     context = rclpy.Context()
     rclpy.init(context=context)
     probe = Node('lost_probe', context=context)
