@@ -865,7 +865,7 @@ _STOP_LINE = re.compile(
 
 
 def recorder_counts(log):
-    """The counts of the recorder's last stop line in a log, or None if it has none."""
+    """Return the counts of the recorder's last stop line in a log, or None if it has none."""
     matches = list(_STOP_LINE.finditer(log))
     return {key: int(value) for key, value in matches[-1].groupdict().items()} \
         if matches else None
