@@ -54,25 +54,30 @@ class LostMessages:
 
     def poll(self):
         """Read every watched subscription's lost-message count; ``on_lost`` for each > 0."""
-        for subscription, (event, on_lost) in tuple(self._events.items()):
-            # take_data takes only what a wait set said was ready; here nothing waits.
-            event._ready_to_take_data = True
-            try:
-                info = event.take_data()
-            except InvalidHandle:
-                del self._events[subscription]
-                continue
-            count = 0 if info is None else int(info.total_count_change)
-            if count > 0:
-                on_lost(count)
+        for subscription in tuple(self._events):
+            self._read(subscription)
 
     def forget(self, subscription):
         """Read `subscription`'s last losses, then stop watching it (before destroying it)."""
         if subscription not in self._events:
             return
-        self.poll()
-        event, _ = self._events.pop(subscription)
-        event.destroy()
+        self._read(subscription)
+        entry = self._events.pop(subscription, None)
+        if entry is not None:
+            entry[0].destroy()
+
+    def _read(self, subscription):
+        event, on_lost = self._events[subscription]
+        # take_data takes only what a wait set said was ready; here nothing waits.
+        event._ready_to_take_data = True
+        try:
+            info = event.take_data()
+        except InvalidHandle:
+            del self._events[subscription]
+            return
+        count = 0 if info is None else int(info.total_count_change)
+        if count > 0:
+            on_lost(count)
 
     def close(self):
         """Destroy the lost-message handles (before their node: they hold its subscriptions)."""
