@@ -83,6 +83,15 @@ def start_recorder(command, output, diagnostics_period_s):
         stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
 
 
+def close_probe(recorder, probe, context):
+    """Kill the recorder if it still runs (SIGKILL ends a stopped one too), close the probe."""
+    if recorder.poll() is None:
+        recorder.kill()
+        recorder.wait()
+    probe.destroy_node()
+    rclpy.try_shutdown(context=context)
+
+
 def stop_line(log):
     """(received, written, dropped, queue full, failed writes, lost) of the one stop line."""
     lines = [line for line in log.splitlines() if STOP_LINE.search(line)]
@@ -125,11 +134,7 @@ def test_a_stalled_recorder_keeps_every_message_of_a_reliable_topic(tmp_path):
         code = recorder.wait(timeout=30.0)
     finally:
         stop_hog(hogs)
-        if recorder.poll() is None:
-            recorder.kill()
-            recorder.wait()
-        probe.destroy_node()
-        rclpy.try_shutdown(context=context)
+        close_probe(recorder, probe, context)
     log = recorder.stdout.read().decode()
     assert code == 0, log
     assert 'stalled the executor' in log and 'Traceback' not in log, log
@@ -206,13 +211,8 @@ def test_messages_lost_before_a_stopped_recorder_are_counted_and_named(tmp_path)
         recorder.send_signal(signal.SIGINT)
         code = recorder.wait(timeout=30.0)
     finally:
-        if recorder.poll() is None:
-            recorder.send_signal(signal.SIGCONT)
-            recorder.kill()
-            recorder.wait()
         executor.shutdown()
-        probe.destroy_node()
-        rclpy.try_shutdown(context=context)
+        close_probe(recorder, probe, context)
     log = recorder.stdout.read().decode()
     assert code == 0, log
 
