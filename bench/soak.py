@@ -274,6 +274,17 @@ def cdr_header(data, frame=None):
     return stamp, length == len(frame) + 1 and data[16:16 + len(frame)] == frame
 
 
+def stamp_is_valid(data):
+    """
+    Whether the header stamp of `data` (which `cdr_header` reads) is a valid time.
+
+    A builtin_interfaces/Time has sec >= 0 and nanosec < 1e9; the recorder logs a message
+    with any other stamp at its receive time, so the comparison counts those apart.
+    """
+    sec, nanosec = struct.unpack_from('<iI' if data[1] == 1 else '>iI', data, 4)
+    return sec >= 0 and nanosec < NS
+
+
 def cdr_fluid_pressure(data):
     """fluid_pressure [Pa] of a serialized sensor_msgs/FluidPressure, or None."""
     if len(data) < 16:
@@ -407,6 +418,9 @@ class Probe(Node):
         self.latency_ms = SpilledArray('d')
         self.received = {(topic, f): SpilledArray('q') for f in self.fingers
                          for topic in COMPARED}
+        # Messages with a stamp that is no valid time: the recording has them at its
+        # receive time, not their stamp, so they are counted, not looked up.
+        self.invalid_received = collections.Counter()
         self._sequence = [None] * len(self.fingers)
         self.last_command = [None] * len(self.fingers)
         self.goal = None
@@ -471,13 +485,18 @@ class Probe(Node):
         for tracker in self.trackers:
             tracker.expire(now)
 
-    def _record(self, topic, index, header):
-        if self.counting and header is not None and header[0] >= 0:
-            self.received[(topic, self.fingers[index])].append(header[0])
+    def _record(self, topic, index, data, header):
+        if not self.counting or header is None:
+            return
+        key = (topic, self.fingers[index])
+        if stamp_is_valid(data):
+            self.received[key].append(header[0])
+        else:
+            self.invalid_received[key] += 1
 
     def _on_command(self, index, data, info):
         header = cdr_header(data, self._frames[index])
-        self._record('pressure_command', index, header)
+        self._record('pressure_command', index, data, header)
         # Only the controller's commands are timed: the soak's own bad inputs carry
         # another frame id.
         if header is None or not header[1]:
@@ -489,7 +508,7 @@ class Probe(Node):
 
     def _on_shape(self, index, data, info):
         header = cdr_header(data, self._frames[index])
-        self._record('shape', index, header)
+        self._record('shape', index, data, header)
         # Every publish of the model node's shape writer has the next sequence number: a
         # gap is shapes this reader never got (a keep-last writer overwrote them).
         sequence = info.get('publication_sequence_number')
@@ -880,7 +899,8 @@ def read_recording(path, probe, junk=frozenset()):
     and is one of the `junk` payloads the soak sent is counted as such (``junk_sampled``),
     not as a failure: the recorder keeps what was on the wire. For the compared topics, the
     probe received in the counting window are looked up among the recorded publish times
-    (the recorder's header stamps).
+    (the recorder's header stamps); those whose stamp is no valid time, which the recorder
+    logs at their receive time, are counted against the recorded ones with such a stamp.
     """
     from mcap.reader import make_reader
     from mcap_ros2.decoder import DecoderFactory
@@ -888,6 +908,7 @@ def read_recording(path, probe, junk=frozenset()):
     out = {'path': str(path), 'size_mib': path.stat().st_size / 2 ** 20}
     counts = collections.Counter()
     stamps = collections.defaultdict(list)
+    invalid = collections.Counter()
     decode = DecoderFactory()
     decoders = {}
     sampled = collections.Counter()
@@ -904,8 +925,11 @@ def read_recording(path, probe, junk=frozenset()):
         for schema, channel, message in reader.iter_messages(log_time_order=False):
             topic = channel.topic
             counts[topic] += 1
-            if topic in wanted and message.publish_time != message.log_time:
-                stamps[topic].append(message.publish_time)
+            if topic in wanted:
+                if message.publish_time != message.log_time:
+                    stamps[topic].append(message.publish_time)
+                elif cdr_header(message.data) is not None and not stamp_is_valid(message.data):
+                    invalid[topic] += 1
             if counts[topic] % stride == 1:
                 sampled[_decode(decoders, decode, schema, channel, message, junk,
                                 failures)] += 1
@@ -928,8 +952,12 @@ def read_recording(path, probe, junk=frozenset()):
         missing.append(absent)
         inside = recorded[(recorded >= got.min()) & (recorded <= got.max())] if got.size \
             else recorded[:0]
-        comparison[topic] = {'probe': int(got.size), 'recorded': int(recorded.size),
-                             'missing_from_recording': int(absent.size),
+        odd = int(probe.invalid_received.get(key, 0))
+        comparison[topic] = {'probe': int(got.size) + odd,
+                             'recorded': int(recorded.size) + invalid[topic],
+                             'missing_from_recording': int(absent.size)
+                             + max(0, odd - invalid[topic]),
+                             'invalid_stamps': {'probe': odd, 'recorded': invalid[topic]},
                              'missing_at_s': [round((a - probe.t0_ns) * 1e-9, 3)
                                               for a in absent[:200].tolist()],
                              'recorded_not_probed': int((~np.isin(inside, got)).sum())}
@@ -1305,6 +1333,8 @@ def _recording_text(rec):
                 f'from its start, then {rec.get("error") or "its end"}')
     missing = {t: c['missing_from_recording'] for t, c in rec['comparison'].items()
                if c['missing_from_recording']}
+    odd_probe = sum(c['invalid_stamps']['probe'] for c in rec['comparison'].values())
+    odd_recorded = sum(c['invalid_stamps']['recorded'] for c in rec['comparison'].values())
     counts = rec.get('recorder')
     stop = ('no stop line from the recorder' if counts is None else
             "the recorder's stop line: {received} received, {written} written, {dropped} "
@@ -1313,7 +1343,9 @@ def _recording_text(rec):
             f'messages iterated (summary {rec["summary_count"]}), {rec["decoded"]} decoded, '
             f'{rec["decode_failures"]} failures ({rec["junk_sampled"]} of the soak\'s own junk '
             f'payloads among the sampled); probe messages missing from it: '
-            f'{missing or "none"} of {sum(c["probe"] for c in rec["comparison"].values())}'
+            f'{missing or "none"} of {sum(c["probe"] for c in rec["comparison"].values())} '
+            f'({odd_probe} of them with a stamp that is no valid time, counted against the '
+            f'{odd_recorded} such messages recorded)'
             + ''.join(f'\n  undecodable: {f["topic"]} at log time {f["log_time"]}, {f["size"]} '
                       f'bytes ({f["head"]}...): {f["error"]}'
                       for f in rec.get('decode_failure_examples', ())))

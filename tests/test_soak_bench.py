@@ -16,7 +16,7 @@ from sensor_msgs.msg import FluidPressure
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / 'bench'))
 from soak import cdr_fluid_pressure, cdr_header, LatencyTracker, NS  # noqa: E402, I100
 from soak import read_recording, recorder_counts, slope_per_hour  # noqa: E402
-from soak import SpilledArray  # noqa: E402
+from soak import SpilledArray, stamp_is_valid  # noqa: E402
 
 from fpc_gripper.io.mcap_writer import Rosbag2McapWriter  # noqa: E402
 from fpc_gripper.io.recording_counts import RecordingCounts  # noqa: E402
@@ -131,7 +131,7 @@ def test_the_recording_check_counts_the_soaks_own_junk_apart_from_a_failure(tmp_
                                            ('/corrupt', corrupt))):
             writer.add_topic(topic, 'sensor_msgs/msg/FluidPressure')
             writer.write(topic, data, NS + i)
-    probe = types.SimpleNamespace(received={}, t0_ns=0)
+    probe = types.SimpleNamespace(received={}, invalid_received={}, t0_ns=0)
     out = read_recording(path, probe, junk={junk, b''})
     assert (out['decoded'], out['junk_sampled'], out['decode_failures']) == (2, 2, 2)
     # Each failure says what it was: the corrupt message, twice (first and last of its topic).
@@ -141,6 +141,44 @@ def test_the_recording_check_counts_the_soaks_own_junk_apart_from_a_failure(tmp_
     # Without the soak's list, its junk is a failure like any other.
     out = read_recording(path, probe)
     assert (out['decoded'], out['junk_sampled'], out['decode_failures']) == (2, 0, 4)
+
+
+def test_a_stamp_is_valid_only_with_seconds_from_zero_and_nanoseconds_below_one_second():
+    assert stamp_is_valid(_pressure(0, 0, 'f', 1.0))
+    assert stamp_is_valid(_pressure(2147483647, 999_999_999, 'f', 1.0))
+    assert not stamp_is_valid(_pressure(2147483647, 4_000_000_000, 'f', 1.0))
+    assert not stamp_is_valid(_pressure(1, 1_000_000_000, 'f', 1.0))
+    assert not stamp_is_valid(_pressure(-1, 0, 'f', 1.0))
+    assert not stamp_is_valid(_pressure(-2147483648, 999_999_999, 'f', 1.0))
+
+
+@pytest.mark.parametrize('probe_odd, missing', [(1, 0), (2, 1), (3, 2)])
+def test_messages_with_invalid_stamps_are_counted_against_the_recording(
+        tmp_path, probe_odd, missing):
+    # The recorder logs a message whose stamp is no valid time at its receive time, so the
+    # check cannot find it by its stamp: it compares how many such messages each side has.
+    topic = '/finger_0/pressure_command'
+    path = tmp_path / 'r.mcap'
+    with Rosbag2McapWriter(path) as writer:
+        writer.add_topic(topic, 'sensor_msgs/msg/FluidPressure')
+        for k in range(3):
+            writer.write(topic, _pressure(1, k, 'finger_0', 1.0e5), 5 * NS + k, NS + k)
+        odd = _pressure(2147483647, 4_000_000_000, 'finger_0', 1.0e5)
+        writer.write(topic, odd, 6 * NS, 6 * NS)
+        # Logged at its receive time but with a valid stamp: the recorder found no header
+        # stamp in it (junk), so it is none of the invalid-stamped ones.
+        writer.write(topic, b'\x00\x01\x00\x00\x07', 7 * NS, 7 * NS)
+    key = ('pressure_command', 'finger_0')
+    probe = types.SimpleNamespace(received={key: [NS, NS + 1, NS + 2]},
+                                  invalid_received={key: probe_odd}, t0_ns=0)
+    compared = read_recording(path, probe)['comparison'][topic]
+    assert compared['invalid_stamps'] == {'probe': probe_odd, 'recorded': 1}
+    assert compared['missing_from_recording'] == missing
+    assert compared['probe'] == 3 + probe_odd
+    # A valid stamp the probe had and the recording lacks is missing as before.
+    probe.received[key].append(NS + 3)
+    assert read_recording(path, probe)['comparison'][topic]['missing_from_recording'] \
+        == missing + 1
 
 
 def test_rss_slopes_least_squares_and_theil_sen():
