@@ -434,6 +434,13 @@ class Probe(Node):
                                                    RELIABLE) for f in self.fingers]
         self.force_pubs = [self.create_publisher(WrenchStamped, f'{f}/tip_force', RELIABLE)
                            for f in self.fingers]
+        # Empty payloads get writers of their own. A reliable Fast DDS reader rejects a
+        # 0-byte payload without acknowledging it, so the writer's next samples wait at
+        # every reader until the empties have left its keep-last history (depth samples
+        # later): on the writer of the other faults, a burst of empties held a 0.9 MB
+        # command for 70 s, with its memory.
+        self.empty_pubs = [self.create_publisher(FluidPressure, f'{f}/pressure_command',
+                                                 RELIABLE) for f in self.fingers]
         self.fault_pub = self.create_publisher(String, FAULT_TOPIC, RELIABLE)
         for i, f in enumerate(self.fingers):
             # Two-argument callbacks get the message info: source timestamp and sequence.
@@ -669,7 +676,7 @@ class FaultInjector:
         count = self._burst(200)
         self.junk.add(b'')
         for _ in range(count):
-            self.probe.command_pubs[finger].publish(b'')
+            self.probe.empty_pubs[finger].publish(b'')
         return {'count': count, 'detail': '0-byte pressure_command payloads'}
 
     def _raw_payload(self, finger, now):
