@@ -15,11 +15,17 @@ from sensor_msgs.msg import FluidPressure
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / 'bench'))
 from soak import cdr_fluid_pressure, cdr_header, LatencyTracker, NS  # noqa: E402, I100
-from soak import read_recording, recorder_counts, slope_per_hour  # noqa: E402
-from soak import SpilledArray, stamp_is_valid  # noqa: E402
+from soak import FaultInjector, read_recording, recorder_counts  # noqa: E402
+from soak import slope_per_hour, SpilledArray, stamp_is_valid  # noqa: E402
 
 from fpc_gripper.io.mcap_writer import Rosbag2McapWriter  # noqa: E402
 from fpc_gripper.io.recording_counts import RecordingCounts  # noqa: E402
+
+
+#: The fault kinds that put messages on the gripper's topics (not the regulator's).
+FAULT_KINDS_ON_WIRE = ('nan_pressure', 'range_pressure', 'bad_force', 'empty_payload',
+                       'raw_payload', 'stale_stamp', 'future_stamp', 'negative_stamp',
+                       'long_frame_id')
 
 
 def _pressure(sec, nanosec, frame, value):
@@ -179,6 +185,33 @@ def test_messages_with_invalid_stamps_are_counted_against_the_recording(
     probe.received[key].append(NS + 3)
     assert read_recording(path, probe)['comparison'][topic]['missing_from_recording'] \
         == missing + 1
+
+
+class _Writer:
+    def __init__(self):
+        self.sent = []
+
+    def publish(self, data):
+        self.sent.append(data)
+
+
+def test_empty_payloads_go_out_on_writers_that_send_nothing_else():
+    # A reliable Fast DDS reader rejects a 0-byte payload without acknowledging it, and so
+    # holds the same writer's next samples: the other faults must not share its writer.
+    fingers = ('finger_0', 'finger_1')
+    probe = types.SimpleNamespace(
+        fingers=fingers, last_command=[None, None],
+        command_pubs=[_Writer() for _ in fingers], force_pubs=[_Writer() for _ in fingers],
+        empty_pubs=[_Writer() for _ in fingers])
+    faults = FaultInjector(probe, np.random.default_rng(5), FAULT_KINDS_ON_WIRE, 1.0)
+    for kind in FAULT_KINDS_ON_WIRE:
+        for finger in range(len(fingers)):
+            getattr(faults, '_' + kind)(finger, 0.0)
+    for finger in range(len(fingers)):
+        empties = probe.empty_pubs[finger].sent
+        assert empties and all(data == b'' for data in empties)
+        others = probe.command_pubs[finger].sent + probe.force_pubs[finger].sent
+        assert others and all(not isinstance(data, bytes) or data for data in others)
 
 
 def test_rss_slopes_least_squares_and_theil_sen():
