@@ -15,7 +15,7 @@ from sensor_msgs.msg import FluidPressure
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / 'bench'))
 from soak import cdr_fluid_pressure, cdr_header, LatencyTracker, NS  # noqa: E402, I100
-from soak import FaultInjector, read_recording, recorder_counts  # noqa: E402
+from soak import FaultInjector, is_junk, read_recording, recorder_counts  # noqa: E402
 from soak import slope_per_hour, SpilledArray, stamp_is_valid  # noqa: E402
 
 from fpc_gripper.io.mcap_writer import Rosbag2McapWriter  # noqa: E402
@@ -212,6 +212,22 @@ def test_empty_payloads_go_out_on_writers_that_send_nothing_else():
         assert empties and all(data == b'' for data in empties)
         others = probe.command_pubs[finger].sent + probe.force_pubs[finger].sent
         assert others and all(not isinstance(data, bytes) or data for data in others)
+
+
+def test_junk_comes_back_padded_to_four_bytes_with_zeros():
+    # A 57-byte random payload the soak sent was recorded as those 57 bytes and 3 zeros.
+    sent = bytes.fromhex('07acf90af74a3bae531f3bf2b065a61aaaa72785964fee22226c81687050b23c'
+                         '9360b7c16369e818b0f4010a440548097cf117e5277d533145')
+    junk = {sent, b'\x00\x01\x00\x00\x05\x06\x07\x08'}
+    assert len(sent) == 57
+    assert is_junk(sent, junk) and is_junk(sent + bytes(3), junk)
+    assert is_junk(b'\x00\x01\x00\x00\x05\x06\x07\x08', junk)
+    # Not padding: more than 3 bytes, bytes that are not zeros, or a length that is no
+    # multiple of 4.
+    assert not is_junk(sent + bytes(7), junk)
+    assert not is_junk(sent + b'\x00\x00\x01', junk)
+    assert not is_junk(sent + bytes(2), junk)
+    assert not is_junk(sent[:-1] + bytes(4), junk)
 
 
 def test_rss_slopes_least_squares_and_theil_sen():
