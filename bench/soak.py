@@ -434,11 +434,11 @@ class Probe(Node):
                                                    RELIABLE) for f in self.fingers]
         self.force_pubs = [self.create_publisher(WrenchStamped, f'{f}/tip_force', RELIABLE)
                            for f in self.fingers]
-        # Empty payloads get writers of their own. A reliable Fast DDS reader rejects a
-        # 0-byte payload without acknowledging it, so the writer's next samples wait at
-        # every reader until the empties have left its keep-last history (depth samples
-        # later): on the writer of the other faults, a burst of empties held a 0.9 MB
-        # command for 70 s, with its memory.
+        # Empty payloads get writers of their own. Fast DDS drops a 0-byte payload on
+        # receipt and a reliable reader waits for its sequence number, so the writer's
+        # next samples wait at every reader until the empties have left its keep-last
+        # history (depth samples later; README, Empty payloads): on the writer of the
+        # other faults, a burst of empties held a 0.9 MB command for 70 s, and its memory.
         self.empty_pubs = [self.create_publisher(FluidPressure, f'{f}/pressure_command',
                                                  RELIABLE) for f in self.fingers]
         self.fault_pub = self.create_publisher(String, FAULT_TOPIC, RELIABLE)

@@ -196,8 +196,9 @@ class _Writer:
 
 
 def test_empty_payloads_go_out_on_writers_that_send_nothing_else():
-    # A reliable Fast DDS reader rejects a 0-byte payload without acknowledging it, and so
-    # holds the same writer's next samples: the other faults must not share its writer.
+    # Fast DDS drops a 0-byte payload on receipt, and a reliable reader then holds the same
+    # writer's next samples until the writer gives up on it: the other faults must not
+    # share its writer.
     fingers = ('finger_0', 'finger_1')
     probe = types.SimpleNamespace(
         fingers=fingers, last_command=[None, None],
