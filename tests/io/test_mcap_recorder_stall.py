@@ -163,8 +163,9 @@ def test_messages_lost_before_a_stopped_recorder_are_counted_and_named(tmp_path)
     1: it keeps only its newest). After the first is acknowledged, the whole recorder
     process is stopped (SIGSTOP: its middleware threads too) while 400 are published,
     then continued. Its socket buffers hold a few; the rest are gone from the publisher's
-    history before the reader can ask for them. The recorder's count of them, on
-    /diagnostics and in its stop line, must equal the numbers missing from the file.
+    history before the reader can ask for them (under load, a few after it too). The
+    recorder's count of them, on /diagnostics and in its stop line, must equal the numbers
+    missing from the file.
     """
     count, stopped = 600, 400
     output = tmp_path / 'stopped.mcap'
@@ -202,6 +203,8 @@ def test_messages_lost_before_a_stopped_recorder_are_counted_and_named(tmp_path)
                 time.sleep(0.001)
         finally:
             recorder.send_signal(signal.SIGCONT)
+        # The continued recorder has caught up (its socket buffers drained) before the rest.
+        assert publisher.wait_for_all_acked(Duration(seconds=30.0))
         for i in range(stopped + 1, count):
             publish(i)
             time.sleep(0.002)
@@ -219,7 +222,11 @@ def test_messages_lost_before_a_stopped_recorder_are_counted_and_named(tmp_path)
     got = probe_numbers(output)
     missing = sorted(set(range(count)) - set(got))
     assert got == sorted(got)       # in order, none twice
-    assert missing and set(missing) <= set(range(1, stopped + 1)), missing
+    # Message 0 was acknowledged before the stop, and the stop loses some. On a loaded
+    # machine a message after it can be lost too (one was, with a busy loop on one core):
+    # what this test holds the recorder to is that every loss is counted.
+    assert missing and missing[0] >= 1, missing
+    assert set(missing) & set(range(1, stopped + 1)), missing
     received, written, dropped, _, _, lost = stop_line(log)
     assert lost == len(missing) == int(latest['lost before the recorder']), log
     assert received == written == len(got) == count - lost and dropped == 0
