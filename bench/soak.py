@@ -76,6 +76,7 @@ sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 from soak_nodes import FAULT_TOPIC  # noqa: E402, I100 - after the path insert
 from timing import machine  # noqa: E402
 
+from fpc_gripper.io.cdr import header_stamp, INVALID_STAMP  # noqa: E402
 from fpc_gripper.io.config import default_gripper_config_path  # noqa: E402
 from fpc_gripper.io.config import load_gripper_config  # noqa: E402
 from fpc_gripper.nodes.middleware import apply_middleware_settings  # noqa: E402
@@ -274,17 +275,6 @@ def cdr_header(data, frame=None):
     return stamp, length == len(frame) + 1 and data[16:16 + len(frame)] == frame
 
 
-def stamp_is_valid(data):
-    """
-    Whether the header stamp of `data` (which `cdr_header` reads) is a valid time.
-
-    A builtin_interfaces/Time has sec >= 0 and nanosec < 1e9; the recorder logs a message
-    with any other stamp at its receive time, so the comparison counts those apart.
-    """
-    sec, nanosec = struct.unpack_from('<iI' if data[1] == 1 else '>iI', data, 4)
-    return sec >= 0 and nanosec < NS
-
-
 def cdr_fluid_pressure(data):
     """fluid_pressure [Pa] of a serialized sensor_msgs/FluidPressure, or None."""
     if len(data) < 16:
@@ -418,8 +408,9 @@ class Probe(Node):
         self.latency_ms = SpilledArray('d')
         self.received = {(topic, f): SpilledArray('q') for f in self.fingers
                          for topic in COMPARED}
-        # Messages with a stamp that is no valid time: the recording has them at its
-        # receive time, not their stamp, so they are counted, not looked up.
+        # Messages with a stamp that is no valid time (the recorder's rule, `header_stamp`):
+        # the recording has them at its receive time, not their stamp, so they are
+        # counted, not looked up.
         self.invalid_received = collections.Counter()
         self._sequence = [None] * len(self.fingers)
         self.last_command = [None] * len(self.fingers)
@@ -496,10 +487,10 @@ class Probe(Node):
         if not self.counting or header is None:
             return
         key = (topic, self.fingers[index])
-        if stamp_is_valid(data):
-            self.received[key].append(header[0])
-        else:
+        if header_stamp(data) is INVALID_STAMP:
             self.invalid_received[key] += 1
+        else:
+            self.received[key].append(header[0])
 
     def _on_command(self, index, data, info):
         header = cdr_header(data, self._frames[index])
@@ -935,7 +926,8 @@ def read_recording(path, probe, junk=frozenset()):
             if topic in wanted:
                 if message.publish_time != message.log_time:
                     stamps[topic].append(message.publish_time)
-                elif cdr_header(message.data) is not None and not stamp_is_valid(message.data):
+                elif (cdr_header(message.data) is not None
+                      and header_stamp(message.data) is INVALID_STAMP):
                     invalid[topic] += 1
             if counts[topic] % stride == 1:
                 sampled[_decode(decoders, decode, schema, channel, message, junk,

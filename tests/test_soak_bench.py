@@ -16,7 +16,7 @@ from sensor_msgs.msg import FluidPressure
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / 'bench'))
 from soak import cdr_fluid_pressure, cdr_header, LatencyTracker, NS  # noqa: E402, I100
 from soak import FaultInjector, is_junk, read_recording, recorder_counts  # noqa: E402
-from soak import slope_per_hour, SpilledArray, stamp_is_valid  # noqa: E402
+from soak import slope_per_hour, SpilledArray  # noqa: E402
 
 from fpc_gripper.io.mcap_writer import Rosbag2McapWriter  # noqa: E402
 from fpc_gripper.io.recording_counts import RecordingCounts  # noqa: E402
@@ -147,15 +147,6 @@ def test_the_recording_check_counts_the_soaks_own_junk_apart_from_a_failure(tmp_
     # Without the soak's list, its junk is a failure like any other.
     out = read_recording(path, probe)
     assert (out['decoded'], out['junk_sampled'], out['decode_failures']) == (2, 0, 4)
-
-
-def test_a_stamp_is_valid_only_with_seconds_from_zero_and_nanoseconds_below_one_second():
-    assert stamp_is_valid(_pressure(0, 0, 'f', 1.0))
-    assert stamp_is_valid(_pressure(2147483647, 999_999_999, 'f', 1.0))
-    assert not stamp_is_valid(_pressure(2147483647, 4_000_000_000, 'f', 1.0))
-    assert not stamp_is_valid(_pressure(1, 1_000_000_000, 'f', 1.0))
-    assert not stamp_is_valid(_pressure(-1, 0, 'f', 1.0))
-    assert not stamp_is_valid(_pressure(-2147483648, 999_999_999, 'f', 1.0))
 
 
 @pytest.mark.parametrize('probe_odd, missing', [(1, 0), (2, 1), (3, 2)])

@@ -146,10 +146,19 @@ def test_a_big_endian_header_stamp_is_read_too():
     assert cdr.header_stamp(data) == 12_000_000_034
 
 
-@pytest.mark.parametrize('sec, nanosec', [(-1, 0), (5, 1_000_000_000)])
+# The soak's probe tells these apart by the same rule, so it injects the extremes too.
+@pytest.mark.parametrize('sec, nanosec', [(-1, 0), (5, 1_000_000_000), (1, 1_000_000_000),
+                                          (2147483647, 4_000_000_000),
+                                          (-2147483648, 999_999_999)])
 def test_a_header_stamp_that_is_no_time_is_told_apart(sec, nanosec):
     data = b'\x00\x01\x00\x00' + struct.pack('<iI', sec, nanosec) + b'\x00' * 8
     assert cdr.header_stamp(data) is cdr.INVALID_STAMP
+
+
+@pytest.mark.parametrize('sec, nanosec', [(0, 0), (2147483647, 999_999_999)])
+def test_a_header_stamp_at_the_ends_of_time_is_a_time(sec, nanosec):
+    data = serialize_message(_pressure((sec, nanosec), 'f', 1.0, 0.0))
+    assert cdr.header_stamp(data) == sec * 1_000_000_000 + nanosec
 
 
 def test_data_too_short_for_a_stamp_has_none():
