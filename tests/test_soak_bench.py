@@ -15,6 +15,7 @@ from sensor_msgs.msg import FluidPressure
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / 'bench'))
 from soak import cdr_fluid_pressure, cdr_header, LatencyTracker, NS  # noqa: E402, I100
+from soak import FAULT_KINDS  # noqa: E402
 from soak import FaultInjector, is_junk, read_recording, recorder_counts  # noqa: E402
 from soak import slope_per_hour, SpilledArray  # noqa: E402
 
@@ -23,9 +24,7 @@ from fpc_gripper.io.recording_counts import RecordingCounts  # noqa: E402
 
 
 #: The fault kinds that put messages on the gripper's topics (not the regulator's).
-FAULT_KINDS_ON_WIRE = ('nan_pressure', 'range_pressure', 'bad_force', 'empty_payload',
-                       'raw_payload', 'stale_stamp', 'future_stamp', 'negative_stamp',
-                       'long_frame_id')
+FAULT_KINDS_ON_WIRE = tuple(k for k in FAULT_KINDS if not k.startswith('regulator_'))
 
 
 def _pressure(sec, nanosec, frame, value):
@@ -195,6 +194,7 @@ def test_empty_payloads_go_out_on_writers_that_send_nothing_else():
         fingers=fingers, last_command=[None, None],
         command_pubs=[_Writer() for _ in fingers], force_pubs=[_Writer() for _ in fingers],
         empty_pubs=[_Writer() for _ in fingers])
+    assert 'empty_payload' in FAULT_KINDS_ON_WIRE
     faults = FaultInjector(probe, np.random.default_rng(5), FAULT_KINDS_ON_WIRE, 1.0)
     for kind in FAULT_KINDS_ON_WIRE:
         for finger in range(len(fingers)):
