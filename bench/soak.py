@@ -1000,8 +1000,9 @@ def is_junk(data, junk):
     """
     if data in junk:
         return True
-    return any(data[-pad:] == bytes(pad) and data[:-pad] in junk for pad in (1, 2, 3)
-               if len(data) % 4 == 0 and len(data) >= pad)
+    if len(data) % 4:
+        return False
+    return any(data.endswith(bytes(pad)) and data[:-pad] in junk for pad in (1, 2, 3))
 
 
 def _decode(decoders, factory, schema, channel, message, junk=frozenset(), failures=None):
