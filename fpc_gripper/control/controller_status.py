@@ -47,7 +47,7 @@ def controller_status(out, names, inputs):
     names : sequence of str
         The fingers' names, the prefix of their keys.
     inputs : ControllerInputs
-        A rejected input is a WARN until its source delivers a good one.
+        A rejected or lost input is a WARN until its source delivers a good one.
 
     Returns
     -------
@@ -72,6 +72,7 @@ def controller_status(out, names, inputs):
         values[f'{name}/contact_force_n'] = f'{finger.contact_force:.4f}'
         values[f'{name}/saturated'] = str(finger.saturated)
     values['rejected_inputs'] = str(inputs.rejected)
+    values['lost_messages'] = str(inputs.lost_messages)
     values['last_rejection'] = inputs.last_rejection
     message = bounded(f'{out.message}; {problems}' if problems else out.message)
     return Status(level, message, values)

@@ -24,8 +24,9 @@ class ControllerInputs:
 
     Every subscriber callback of the controller node is one call here (``offer_*``),
     free of ROS. A rejected input changes nothing: the last good measurement and the
-    goal stay. While the newest input of a source (a topic) is rejected, `problems`
-    names it, and the node reports WARN until that source delivers a good input.
+    goal stay. While the newest input of a source (a topic) is rejected, or the
+    middleware lost messages of it (`lost`), `problems` names it, and the node reports
+    WARN until that source delivers a good input.
 
     Parameters
     ----------
@@ -55,8 +56,10 @@ class ControllerInputs:
         self.stamp = [None] * n
         self.tip_force = [(0.0, 0.0)] * n
         self.rejected = 0
+        self.lost_messages = 0
         self.last_rejection = 'none'
         self._problems = {}
+        self._lost = {}
 
     @property
     def bounds(self):
@@ -145,6 +148,15 @@ class ControllerInputs:
         self._record(source, check)
         return check
 
+    def lost(self, source, count):
+        """Record `count` messages of `source` that the middleware lost; return the check."""
+        count = max(int(count), 0)
+        self.lost_messages += count
+        self._lost[source] = self._lost.get(source, 0) + count
+        return self.reject(source, Rejection.LOST,
+                           f'{count} message(s) lost ({self._lost[source]} in all): the '
+                           'middleware could not deliver them')
+
     def _goal(self, source, setter, value, now):
         number = real_or_none(value)
         if number is None or not math.isfinite(number):
@@ -162,9 +174,10 @@ class ControllerInputs:
         if check.accepted:
             self._problems.pop(source, None)
             return True
-        self.rejected += 1
+        lost = check.rejection is Rejection.LOST
+        self.rejected += not lost
         self.last_rejection = bounded(f'{source} ({check.rejection.value}): {check.detail}')
-        self._problems[source] = self.last_rejection
+        self._problems[source] = ('' if lost else 'rejected ') + self.last_rejection
         return False
 
     # -- outputs ----------------------------------------------------------------------------
@@ -172,7 +185,7 @@ class ControllerInputs:
     @property
     def problems(self):
         """The sources whose newest input was rejected, with why ('' when none)."""
-        return bounded('; '.join(f'rejected {text}' for text in self._problems.values()))
+        return bounded('; '.join(self._problems.values()))
 
     def measurements(self):
         """Return every finger's `FingerMeasurement`, from the last good inputs."""

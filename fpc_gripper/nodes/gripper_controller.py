@@ -183,10 +183,12 @@ class GripperController(Node):
         return self._gripper_cmd.stopping()
 
     def destroy_node(self):
-        """Abort a running GripperCommand goal, then destroy the node."""
+        """Abort a running GripperCommand goal, close the lost-message handles, then destroy."""
         if getattr(self, '_gripper_cmd', None) is not None:
             self._gripper_cmd.destroy()
             self._gripper_cmd = None
+        if getattr(self, '_guard', None) is not None:
+            self._guard.close()
         return super().destroy_node()
 
     # -- parameters -------------------------------------------------------------------------
@@ -197,7 +199,8 @@ class GripperController(Node):
     def _subscribe(self, msg_type, topic, source, qos, callback):
         """Subscribe an input through the guard; `source` names it in the diagnostics."""
         self._guard.subscribe(self, msg_type, topic, qos, callback,
-                              functools.partial(self._on_refused, source))
+                              functools.partial(self._on_refused, source),
+                              functools.partial(self._on_lost, source))
 
     def _values(self, names):
         return {name: self.get_parameter(name).value for name in names}
@@ -269,11 +272,15 @@ class GripperController(Node):
     def _on_refused(self, source, check):
         self._after_input(self._inputs.reject(source, check.rejection, check.detail), source)
 
+    def _on_lost(self, source, count):
+        """Report messages the middleware lost on an input (see README: empty payloads)."""
+        self._after_input(self._inputs.lost(source, count), source)
+
     def _after_input(self, check, topic, index=None):
         if not check.accepted:
             where = topic if index is None else f'{self._names[index]}/{topic}'
-            self._log.warning(f'{where} rejected ({check.rejection.value}), keeping the last '
-                              f'good value: {check.detail}', key=(where, check.rejection))
+            self._log.warning(f'{check.headline(where)}, keeping the last good value: '
+                              f'{check.detail}', key=(where, check.rejection))
         return check
 
     # -- the loop ---------------------------------------------------------------------------

@@ -136,6 +136,10 @@ class InputGuard:
         """Read every guarded subscription's lost-message count; ``on_lost`` for each > 0."""
         self._lost.poll()
 
+    def forget(self, subscription):
+        """Read `subscription`'s last losses, then stop watching it (before destroying it)."""
+        self._lost.forget(subscription)
+
     def close(self):
         """Destroy the lost-message handles (before their node: they hold its subscriptions)."""
         self._lost.close()

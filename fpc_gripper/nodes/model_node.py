@@ -298,8 +298,8 @@ class ModelNode(Node):
         if not check.accepted:
             name = self._core.names[index]
             self._log.warning(
-                f'{name}/{topic} rejected ({check.rejection.value}), keeping the last good '
-                f'state: {check.detail}', key=(index, check.rejection))
+                f'{check.headline(f"{name}/{topic}")}, keeping the last good state: '
+                f'{check.detail}', key=(index, check.rejection))
             self._outputs.publish_diagnostics()
             return
         self._run(self._core.ready(time.monotonic_ns()))

@@ -119,6 +119,7 @@ class RegulatorBridge(SelfActivatingNode):
     def destroy_node(self):
         """Put every channel in its safe state, close the backend, then destroy the node."""
         self._release_backend('node destroyed')
+        self._guard.close()
         super().destroy_node()
 
     # -- lifecycle --------------------------------------------------------------------------
@@ -233,12 +234,14 @@ class RegulatorBridge(SelfActivatingNode):
         self._command_subs = tuple(
             self._guard.subscribe(self, FluidPressure, f'{name}/pressure_command',
                                   _COMMAND_QOS, functools.partial(self._on_command, i),
-                                  functools.partial(self._on_refused, i))
+                                  functools.partial(self._on_refused, i),
+                                  functools.partial(self._on_lost, i))
             for i, name in enumerate(self.finger_names))
 
     def _destroy_entities(self):
         self._stop_timer()
         for sub in self._command_subs:
+            self._guard.forget(sub)
             self.destroy_subscription(sub)
         for pub in self._pressure_pubs:
             self.destroy_lifecycle_publisher(pub)
@@ -303,9 +306,14 @@ class RegulatorBridge(SelfActivatingNode):
         if self.core is not None:
             self._rejected(index, self.core.reject(index, check.rejection, check.detail))
 
+    def _on_lost(self, index, count):
+        """Report commands the middleware lost (see README: empty payloads)."""
+        if self.core is not None:
+            self._rejected(index, self.core.lost(index, count))
+
     def _rejected(self, index, check):
         self._log.warning(
-            f'{self.finger_names[index]}/pressure_command rejected ({check.rejection.value}): '
+            f'{check.headline(self.finger_names[index] + "/pressure_command")}: '
             f'{check.detail}', key=(index, check.rejection))
 
     def _on_timer(self):

@@ -159,6 +159,7 @@ class _Channel:
         self.rejection = None
         self.last_rejection = 'none'
         self.rejected = 0
+        self.lost = 0
 
 
 class RegulatorCore:
@@ -269,6 +270,17 @@ class RegulatorCore:
         """Record a command of a channel refused before it became a value; return the check."""
         check = InputCheck(None, Rejection(rejection), bounded(detail))
         self._reject(self._channels[index], check)
+        return check
+
+    def lost(self, index, count):
+        """Record `count` commands the middleware lost on a channel; a WARN until a good one."""
+        channel = self._channels[index]
+        count = max(int(count), 0)
+        channel.lost += count
+        check = InputCheck(None, Rejection.LOST,
+                           f'{count} command(s) lost ({channel.lost} in all): the middleware '
+                           'could not deliver them')
+        channel.rejection = channel.last_rejection = f'{check.rejection.value}: {check.detail}'
         return check
 
     @staticmethod
@@ -433,6 +445,7 @@ class RegulatorCore:
             'max_pressure_pa_gauge': f'{supervisor.max_pressure:.1f}',
             'backend_fault': supervisor.fault or (status.fault or 'none'),
             'rejected_commands': str(channel.rejected),
+            'lost_commands': str(channel.lost),
             'last_rejection': channel.last_rejection,
         }
         message = output.reason if channel.rejection is None else \

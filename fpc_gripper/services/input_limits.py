@@ -75,6 +75,11 @@ class InputCheck:
         """True when the input may be used."""
         return self.rejection is None
 
+    def headline(self, where):
+        """Name a refused input of `where`: '<where> rejected (<why>)', or '(messages lost)'."""
+        verb = '' if self.rejection is Rejection.LOST else ' rejected'
+        return f'{where}{verb} ({self.rejection.value})'
+
 
 def real_or_none(value):
     """Return a real number as a float (NaN and infinities included), anything else as None."""

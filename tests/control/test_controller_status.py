@@ -52,7 +52,8 @@ def test_the_status_holds_every_key_of_the_controller_state():
         assert values[f'{name}/phase'] == 'free'
         assert values[f'{name}/saturated'] == str(i == 2)
     assert values['rejected_inputs'] == '0' and values['last_rejection'] == 'none'
-    assert list(values)[-2:] == ['rejected_inputs', 'last_rejection']
+    assert values['lost_messages'] == '0'
+    assert list(values)[-3:] == ['rejected_inputs', 'lost_messages', 'last_rejection']
 
 
 def test_a_rejected_input_makes_the_status_warn_and_says_why():

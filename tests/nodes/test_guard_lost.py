@@ -127,3 +127,83 @@ def test_the_recorder_arms_no_lost_message_event(context, tmp_path):
     finally:
         recorder.destroy_node()
         publisher_node.destroy_node()
+
+
+# A writer in another process sends one empty payload, then enough good messages (12, over
+# its depth of 10) for Fast DDS to drop the empty one from its history and send a GAP: the
+# reader's middleware then counts one lost message (README: empty payloads).
+STALLER = """
+import sys, time
+import rclpy
+from rclpy.serialization import serialize_message
+from sensor_msgs.msg import FluidPressure
+from std_msgs.msg import Float64
+rclpy.init()
+node = rclpy.create_node('staller')
+pubs = [node.create_publisher(FluidPressure, sys.argv[1], 10),
+        node.create_publisher(Float64, sys.argv[2], 10)]
+deadline = time.monotonic() + 60.0
+while any(p.get_subscription_count() == 0 for p in pubs) and time.monotonic() < deadline:
+    time.sleep(0.05)
+time.sleep(0.5)
+good = [serialize_message(FluidPressure(fluid_pressure=150e3)),
+        serialize_message(Float64(data=0.08))]
+for pub, payload in zip(pubs, good):
+    pub.publish(b'')
+    for _ in range(12):
+        pub.publish(payload)
+        time.sleep(0.01)
+time.sleep(float(sys.argv[3]))
+node.destroy_node()
+rclpy.shutdown()
+"""
+
+
+def test_the_bridge_and_the_controller_report_a_message_lost_in_another_process(context):
+    from fpc_gripper.nodes.gripper_controller import GripperController
+    from fpc_gripper.nodes.regulator_bridge import RegulatorBridge
+    # Apart, so that the controller's commands never reach this bridge.
+    bridge = RegulatorBridge.create_active(context=context, namespace='/lost_bridge')
+    controller = GripperController(context=context, namespace='/lost_controller')
+    executor, _ = make_executor([bridge, controller])
+    staller = subprocess.Popen([sys.executable, '-c', STALLER,
+                                '/lost_bridge/finger_0/pressure_command',
+                                '/lost_controller/aperture_command', '30'])
+    guards = (bridge._guard, controller._guard)
+    try:
+        assert _armed_handlers(bridge) == [] and _armed_handlers(controller) == []
+        deadline = time.monotonic() + 60.0
+        # A reader keeps the last 10 (its depth) of what the GAP releases at once.
+        while (any(g.lost == 0 or g.decoded < 10 for g in guards)
+               and staller.poll() is None and time.monotonic() < deadline):
+            executor.spin_once(timeout_sec=0.05)
+        # The empty payload is lost, counted once; the good messages after it came.
+        assert [(g.lost, g.refused) for g in guards] == [(1, 0)] * 2
+        assert all(10 <= g.decoded <= 12 for g in guards)
+        assert bridge.core._channels[0].lost == controller._inputs.lost_messages == 1
+        report = bridge.core.step(bridge._latch()).reports[0]
+        assert (report.values['lost_commands'], report.values['rejected_commands']) == ('1', '0')
+        assert controller.law.mode.value == 'aperture'
+    finally:
+        staller.kill()
+        staller.wait()
+        executor.shutdown()
+        controller.destroy_node()
+        bridge.destroy_node()
+
+
+def test_the_bridge_forgets_its_watches_with_its_subscriptions(context):
+    from fpc_gripper.nodes.regulator_bridge import RegulatorBridge
+    bridge = RegulatorBridge.create_active(context=context, namespace='/lost_cycle')
+    try:
+        watched = bridge._guard._lost._events
+        assert set(watched) == set(bridge._command_subs) and len(watched) == 3
+        for trigger in (bridge.trigger_deactivate, bridge.trigger_cleanup):
+            trigger()
+        assert bridge._command_subs == () and watched == {}
+        assert bridge.configure_and_activate(raise_on_failure=True)
+        assert set(watched) == set(bridge._command_subs) and len(watched) == 3
+        bridge._guard.poll_lost()              # every handle is live: no InvalidHandle
+    finally:
+        bridge.destroy_node()
+    assert watched == {}

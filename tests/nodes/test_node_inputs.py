@@ -288,3 +288,54 @@ def test_bridge_refuses_a_default_command(context):
         assert report.level == 0 and report.values['rejected_commands'] == '1'
     finally:
         bridge.destroy_node()
+
+
+def test_controller_reports_lost_messages_apart_from_rejections(context):
+    node = GripperController(context=context, namespace='/controller_lost')
+    try:
+        node._log._logger = log = Tee(node.get_logger())
+        states = record(node._state_pub)
+        node._on_pressure(0, pressure(ATM + 1e3))
+        node._on_lost('finger_0/pressure', 3)
+        node._on_lost('finger_0/pressure', 2)
+        node._on_timer()
+        state = states[-1]
+        values = {kv.key: kv.value for kv in state.values}
+        assert state.level == b'\x01'
+        assert ('finger_0/pressure (messages lost): 2 message(s) lost (5 in all)'
+                in state.message)
+        # A loss is no rejection, and says so.
+        assert 'rejected' not in state.message and values['rejected_inputs'] == '0'
+        assert values['lost_messages'] == '5'
+        assert node._inputs.pressure[0] == pytest.approx(1e3, abs=1e-9)
+        # One line for the losses (throttled per key), not worded as a rejection.
+        assert [line for level, line in log.lines if line.startswith('finger_0/pressure')] == [
+            'finger_0/pressure (messages lost), keeping the last good value: 3 message(s) '
+            'lost (3 in all): the middleware could not deliver them']
+        node._on_pressure(0, pressure(ATM + 2e3))
+        node._on_timer()
+        values = {kv.key: kv.value for kv in states[-1].values}
+        assert states[-1].level == b'\x00' and 'lost' not in states[-1].message
+        assert values['lost_messages'] == '5'
+    finally:
+        node.destroy_node()
+
+
+def test_bridge_reports_lost_commands_until_a_good_one(context):
+    bridge = RegulatorBridge.create_active(context=context, namespace='/bridge_lost')
+    try:
+        bridge._on_command(0, pressure(ATM + 50e3))
+        bridge._on_lost(0, 4)
+        report = bridge.core.step(bridge._latch()).reports[0]
+        assert report.level == 1
+        assert 'messages lost: 4 command(s) lost (4 in all)' in report.message
+        assert (report.values['lost_commands'], report.values['rejected_commands']) == ('4', '0')
+        assert report.values['last_rejection'].startswith('messages lost: 4 command(s)')
+        # The last good command stands: a loss changes no setpoint.
+        assert bridge.supervisors[0].mode is SupervisorMode.TRACKING
+        assert bridge.core.step(bridge._latch()).reports[1].level == 0
+        bridge._on_command(0, pressure(ATM + 60e3))
+        report = bridge.core.step(bridge._latch()).reports[0]
+        assert report.level == 0 and report.values['lost_commands'] == '4'
+    finally:
+        bridge.destroy_node()

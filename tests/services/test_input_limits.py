@@ -15,6 +15,7 @@ from fpc_gripper.services.input_limits import check_frame
 from fpc_gripper.services.input_limits import check_stamp
 from fpc_gripper.services.input_limits import check_tip_force_value
 from fpc_gripper.services.input_limits import InputBounds
+from fpc_gripper.services.input_limits import InputCheck
 from fpc_gripper.services.input_limits import MAX_STAMP_NS
 from fpc_gripper.services.input_limits import Rejection
 from fpc_gripper.services.logs import bounded
@@ -211,3 +212,10 @@ def test_decode_gives_the_message():
     message, check = decode(_valid_payload(), FluidPressure, 4096)
     assert check is None
     assert message.header.frame_id == 'finger_0' and message.fluid_pressure == ATM
+
+
+def test_a_loss_is_named_as_a_loss_and_a_refusal_as_a_refusal():
+    assert InputCheck(None, Rejection.LOST, '3 lost').headline('finger_0/pressure') == \
+        'finger_0/pressure (messages lost)'
+    assert InputCheck(None, Rejection.STALE, 'old').headline('finger_0/pressure') == \
+        'finger_0/pressure rejected (stale)'
