@@ -184,7 +184,7 @@ class ControllerInputs:
 
     @property
     def problems(self):
-        """The sources whose newest input was rejected, with why ('' when none)."""
+        """The sources whose newest input was rejected or lost, with why ('' when none)."""
         return bounded('; '.join(self._problems.values()))
 
     def measurements(self):
