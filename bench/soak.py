@@ -158,6 +158,8 @@ class NodeProcess:
         self.name = name
         self.argv = [str(a) for a in argv]
         self.log_path = pathlib.Path(log_path)
+        # Written by the processes that bench/soak_nodes.py runs (soak_nodes.HeapLog).
+        self.heap_log_path = self.log_path.with_name(f'{name}_heap.jsonl')
         self.exit_code = None
         self.exited_at = None
         self.forced = False
@@ -168,7 +170,8 @@ class NodeProcess:
             self.process = subprocess.Popen(
                 self.argv, cwd=ROOT, stdin=subprocess.DEVNULL, stdout=log,
                 stderr=subprocess.STDOUT, start_new_session=True,
-                preexec_fn=_die_with_parent)
+                preexec_fn=_die_with_parent,
+                env={**os.environ, 'FPC_SOAK_HEAP_LOG': str(self.heap_log_path)})
         self.pid = self.process.pid
         self.stats = ProcessStats(self.pid)
 
@@ -769,6 +772,37 @@ def slope_per_hour(times, values, robust=False):
     return float(np.polyfit(t[good], v[good], 1)[0] * 3600.0)
 
 
+def read_heap_log(path, t0):
+    """
+    Return the lines of a process's heap log (soak_nodes.HeapLog), ``t`` made [s] since t0.
+
+    An empty list where there is no log (a process that bench/soak_nodes.py did not run).
+    """
+    path = pathlib.Path(path)
+    if not path.exists():
+        return []
+    lines = []
+    for text in path.read_text().splitlines():
+        try:
+            line = json.loads(text)
+        except ValueError:
+            continue                      # the last line, cut by the stop
+        line['t'] -= t0
+        lines.append(line)
+    return lines
+
+
+HEAP_KEYS = ('in_use_mib', 'free_mib', 'pymalloc_blocks')
+
+
+def heap_slopes(lines, robust=False):
+    """Slopes per hour of `HEAP_KEYS` over the heap log's lines after the first minute."""
+    after = [line for line in lines if line['t'] > 60.0]
+    return {key: slope_per_hour([line['t'] for line in after],
+                                [line.get(key, math.nan) for line in after], robust)
+            for key in HEAP_KEYS}
+
+
 def _finite(values):
     return [v for v in values if v is not None and math.isfinite(v)]
 
@@ -1050,6 +1084,11 @@ def make_chart(results, path):
             ax.plot(t, proc(name, key), '--' if name == 'soak' else '-', lw=1.2,
                     label='soak (this process)' if name == 'soak' else name)
         ax.set_ylabel(label)
+    for name, log in results.get('heap', {}).items():
+        lines = [line for line in log['samples'] if 'in_use_mib' in line]
+        axes[0].plot([line['t'] / 60.0 for line in lines],
+                     [line['in_use_mib'] for line in lines], ':', lw=1.2,
+                     label=f'{name}: malloc in use')
     axes[5].plot(t, [s['machine_cpu_pct'] for s in samples], color='k', lw=1.5,
                  label='whole machine (every process)')
     for key, style in (('p50', '-'), ('p95', '--'), ('p99', '-.'), ('max', ':')):
@@ -1281,6 +1320,13 @@ class Soak:
         table = format_table(rows, duration, args.rate)
         kinds = collections.Counter(e['kind'] for e in faults.events)
         goals = probe.goals
+        heap = {}
+        for name, proc in self.procs.items():
+            lines = read_heap_log(proc.heap_log_path, probe.t0)
+            if lines:
+                heap[name] = {'slope_per_h': heap_slopes(lines),
+                              'slope_theil_sen_per_h': heap_slopes(lines, robust=True),
+                              'samples': lines}
         results = {
             'started': started, 'machine': machine(), 'workdir': str(self.workdir),
             'config': {'duration_s': args.duration, 'measured_s': duration,
@@ -1301,6 +1347,7 @@ class Soak:
                                      'shape_gaps')},
             'rss_slope_mib_per_h': self._rss_slopes(names, robust=False),
             'rss_slope_theil_sen_mib_per_h': self._rss_slopes(names, robust=True),
+            'heap': heap,
             'faults': faults.events, 'fault_counts': dict(sorted(kinds.items())),
             'goals': goals,
             'goals_reached': f'{sum(g["reached"] for g in goals)} / {len(goals)}',
@@ -1323,6 +1370,12 @@ class Soak:
         print('RSS slope after the first minute [MiB/h], least squares (Theil-Sen): ' + ', '.join(
             f'{n} {v:+.1f} ({results["rss_slope_theil_sen_mib_per_h"][n]:+.1f})'
             for n, v in results['rss_slope_mib_per_h'].items()))
+        for name, log in heap.items():
+            ls, ts = log['slope_per_h'], log['slope_theil_sen_per_h']
+            print(f'{name} allocator after the first minute, least squares (Theil-Sen): '
+                  f'malloc in use {ls["in_use_mib"]:+.1f} ({ts["in_use_mib"]:+.1f}) MiB/h, '
+                  f'held free {ls["free_mib"]:+.1f} ({ts["free_mib"]:+.1f}) MiB/h, pymalloc '
+                  f'blocks {ls["pymalloc_blocks"]:+.0f} ({ts["pymalloc_blocks"]:+.0f}) /h')
         for crash in self.crashes:
             print(f'CRASH: {crash["node"]} exited {crash["exit_code"]} at {crash["t"]:.1f} s; '
                   f'log tail:\n{crash["log_tail"][-1500:]}')

@@ -13,10 +13,16 @@
 #   {"kind": "disconnect" | "bad_readback" | "leak" | "stuck_sensor", "channel": 0,
 #    "value": NaN, "rate": 1e5, "duration_s": 0.5}
 # and clears them all after duration_s.
+# With FPC_SOAK_HEAP_LOG=PATH in its environment, a process also appends its allocator's
+# state to PATH every FPC_SOAK_HEAP_PERIOD_S (HeapLog), so that the soak can tell memory
+# in use from memory the allocator holds free.
 
+import ctypes
 import functools
 import json
+import os
 import sys
+import time
 
 from rclpy.qos import QoSProfile
 from rclpy.qos import ReliabilityPolicy
@@ -69,17 +75,69 @@ class FaultHook:
             self.node.get_logger().info('soak faults cleared')
 
 
+class _MallInfo2(ctypes.Structure):
+    _fields_ = [(name, ctypes.c_size_t) for name in (
+        'arena', 'ordblks', 'smblks', 'hblks', 'hblkhd', 'usmblks', 'fsmblks', 'uordblks',
+        'fordblks', 'keepcost')]
+
+
+def _mallinfo2():
+    """Return glibc's mallinfo2 (2.33 and later), or None where there is none."""
+    try:
+        function = ctypes.CDLL(None).mallinfo2
+    except (AttributeError, OSError):
+        return None
+    function.restype = _MallInfo2
+    function.argtypes = ()
+    return function
+
+
+class HeapLog:
+    """
+    Append the process's allocator state to a JSON-lines file, on a timer of `node`.
+
+    Each line: ``t`` (CLOCK_MONOTONIC, the soak's clock too) [s]; glibc's bytes in use
+    (``in_use_mib``: every arena's allocated chunks and the mmapped ones), held free in
+    its arenas (``free_mib``) and mmapped (``mmapped_mib``), all in MiB; and pymalloc's
+    live blocks (``pymalloc_blocks``). On the executor's thread, so the sampling makes no
+    allocator arena of its own.
+    """
+
+    def __init__(self, node, path, period_s):
+        self._mallinfo = _mallinfo2()
+        self._file = open(path, 'a', buffering=1)
+        self._timer = node.create_timer(period_s, self.sample)
+
+    def sample(self):
+        """Append one line."""
+        line = {'t': time.monotonic(), 'pymalloc_blocks': sys.getallocatedblocks()}
+        if self._mallinfo is not None:
+            info = self._mallinfo()
+            line.update(in_use_mib=(info.uordblks + info.hblkhd) / 2 ** 20,
+                        free_mib=info.fordblks / 2 ** 20, mmapped_mib=info.hblkhd / 2 ** 20)
+        self._file.write(json.dumps(line) + '\n')
+
+
+def _heap_log(node):
+    path = os.environ.get('FPC_SOAK_HEAP_LOG')
+    if path:
+        node.soak_heap_log = HeapLog(node, path,
+                                     float(os.environ.get('FPC_SOAK_HEAP_PERIOD_S', '5')))
+
+
 def _gripper_with_hook():
     nodes = compose(record=True, virtual_object=True)
     for node in nodes:
         if isinstance(node, RegulatorBridge):
             node.soak_fault_hook = FaultHook(node)
+            _heap_log(node)
     return nodes
 
 
 def _bridge_with_hook():
     node = RegulatorBridge(auto_activate_default=True)
     node.soak_fault_hook = FaultHook(node)
+    _heap_log(node)
     return node
 
 

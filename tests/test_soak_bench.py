@@ -1,5 +1,6 @@
 """The soak benchmark's own measuring parts: CDR headers, command-shape matching, the recording."""
 
+import json
 import math
 import pathlib
 import sys
@@ -17,7 +18,8 @@ sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / 'bench'))
 from soak import cdr_fluid_pressure, cdr_header, LatencyTracker, NS  # noqa: E402, I100
 from soak import FAULT_KINDS  # noqa: E402
 from soak import FaultInjector, is_junk, read_recording, recorder_counts  # noqa: E402
-from soak import slope_per_hour, SpilledArray  # noqa: E402
+from soak import heap_slopes, read_heap_log, slope_per_hour, SpilledArray  # noqa: E402
+from soak_nodes import HeapLog  # noqa: E402
 
 from fpc_gripper.io.mcap_writer import Rosbag2McapWriter  # noqa: E402
 from fpc_gripper.io.recording_counts import RecordingCounts  # noqa: E402
@@ -258,3 +260,46 @@ def test_the_recorders_stop_line_is_read_from_its_log():
                                     'queue_full': 2, 'failed_writes': 1, 'lost': 5,
                                     'invalid_stamps': 1}
     assert recorder_counts('[INFO] recording 1 topics\n') is None
+
+
+class _TimerNode:
+    """What HeapLog needs of a node: create_timer, whose callback the test calls itself."""
+
+    def create_timer(self, period, callback):
+        self.period, self.callback = period, callback
+
+
+def test_the_heap_log_sees_an_allocation_and_its_slopes_read_back(tmp_path):
+    path = tmp_path / 'gripper_heap.jsonl'
+    node = _TimerNode()
+    log = HeapLog(node, path, 5.0)
+    assert node.period == 5.0 and node.callback == log.sample
+    log.sample()
+    block = bytearray(64 * 2 ** 20)             # 64 MiB, mmapped: in use until freed
+    log.sample()
+    del block
+    log.sample()
+    lines = read_heap_log(path, t0=0.0)
+    assert len(lines) == 3 and all(line['pymalloc_blocks'] > 0 for line in lines)
+    use = [line['in_use_mib'] for line in lines]
+    assert use[1] - use[0] == pytest.approx(64.0, abs=2.0)
+    assert use[2] - use[0] == pytest.approx(0.0, abs=2.0)
+    # The soak's clock is CLOCK_MONOTONIC too: t0 makes the times its own.
+    later = read_heap_log(path, t0=lines[0]['t'])
+    assert later[0]['t'] == 0.0 and 0.0 <= later[2]['t'] < 60.0
+
+
+def test_heap_slopes_skip_the_first_minute_and_a_cut_last_line(tmp_path):
+    path = tmp_path / 'h.jsonl'
+    rows = [{'t': 1000.0 + t, 'in_use_mib': 100.0 + (50.0 if t <= 60 else 0.0) + t / 1800.0,
+             'free_mib': 5.0, 'pymalloc_blocks': 1000 + t} for t in range(0, 1800, 5)]
+    path.write_text(''.join(json.dumps(r) + '\n' for r in rows) + '{"t": 28')
+    lines = read_heap_log(path, t0=1000.0)
+    assert len(lines) == len(rows)
+    for robust in (False, True):
+        slopes = heap_slopes(lines, robust)
+        # 1 MiB per 1800 s is 2 MiB/h; the first minute's 50 MiB is left out.
+        assert slopes['in_use_mib'] == pytest.approx(2.0, rel=1e-6)
+        assert slopes['free_mib'] == pytest.approx(0.0, abs=1e-9)
+        assert slopes['pymalloc_blocks'] == pytest.approx(3600.0, rel=1e-6)
+    assert read_heap_log(tmp_path / 'none.jsonl', 0.0) == []
