@@ -8,8 +8,9 @@
 # starts them (each with its config/<node>.yaml): regulator_bridge (sim backend),
 # model_node (pressure_input command), gripper_controller and mcap_recorder (every gripper
 # topic), plus gripper_demo's virtual object (a 40 mm cylinder on the palm, which answers
-# each measured pressure with the contact force on the finger). The bridge runs through
-# bench/soak_nodes.py, which adds a fault hook into its simulated backend. --rate sets the
+# each measured pressure with the contact force on the finger). Each runs through
+# bench/soak_nodes.py, as its executable runs it, with a heap log (its allocator's state
+# every 5 s); the bridge also gets a fault hook into its simulated backend. --rate sets the
 # bridge's publish_rate_hz, the controller's control_rate_hz and model_node's max_rate_hz.
 # --composed runs them all in one process instead, as the `gripper` executable does with
 # --record --virtual-object (through soak_nodes.py too, for the fault hook).
@@ -244,16 +245,17 @@ def node_commands(rate, seed, mcap_path, config_path, composed=False):
         return ['--ros-args', '--params-file', CONFIG / f'{name}.yaml', *gripper]
 
     return {
-        'mcap_recorder': [py, '-m', 'fpc_gripper.nodes.mcap_recorder', *params('mcap_recorder'),
-                          '-p', f'output_path:={mcap_path}', '-p', 'overwrite:=true'],
+        'mcap_recorder': [py, BENCH / 'soak_nodes.py', 'mcap_recorder',
+                          *params('mcap_recorder'), '-p', f'output_path:={mcap_path}',
+                          '-p', 'overwrite:=true'],
         'regulator_bridge': [py, BENCH / 'soak_nodes.py', 'regulator_bridge',
                              *params('regulator_bridge'), '-p', f'publish_rate_hz:={rate}',
                              '-p', f'sim_seed:={seed}'],
-        'model_node': [py, '-m', 'fpc_gripper.nodes.model_node', *params('model_node'),
+        'model_node': [py, BENCH / 'soak_nodes.py', 'model_node', *params('model_node'),
                        '-p', f'max_rate_hz:={rate}'],
         'virtual_object': [py, BENCH / 'soak_nodes.py', 'virtual_object', '--ros-args',
                            *gripper, *obj],
-        'gripper_controller': [py, '-m', 'fpc_gripper.nodes.gripper_controller',
+        'gripper_controller': [py, BENCH / 'soak_nodes.py', 'gripper_controller',
                                *params('gripper_controller'), '-p', f'control_rate_hz:={rate}',
                                *obj],
     }
@@ -1375,7 +1377,8 @@ class Soak:
             print(f'{name} allocator after the first minute, least squares (Theil-Sen): '
                   f'malloc in use {ls["in_use_mib"]:+.1f} ({ts["in_use_mib"]:+.1f}) MiB/h, '
                   f'held free {ls["free_mib"]:+.1f} ({ts["free_mib"]:+.1f}) MiB/h, pymalloc '
-                  f'blocks {ls["pymalloc_blocks"]:+.0f} ({ts["pymalloc_blocks"]:+.0f}) /h')
+                  f'blocks {ls["pymalloc_blocks"]:+.0f} ({ts["pymalloc_blocks"]:+.0f}) /h'
+                  f'{_trim_text(log["samples"][-1])}')
         for crash in self.crashes:
             print(f'CRASH: {crash["node"]} exited {crash["exit_code"]} at {crash["t"]:.1f} s; '
                   f'log tail:\n{crash["log_tail"][-1500:]}')
@@ -1386,6 +1389,15 @@ class Soak:
                          for p in results['processes'].values())
                  and recording.get('closed') and recording.get('decode_failures') == 0)
         return 0 if clean else 1
+
+
+def _trim_text(line):
+    """Describe the heap trims of a heap log's last line, as the report prints them."""
+    count = line.get('trim_count', 0)
+    if not count:
+        return '; no heap trims'
+    return (f'; {count} heap trims, mean {line["trim_total_s"] / count * 1e3:.1f} ms, '
+            f'longest {line["trim_max_s"] * 1e3:.1f} ms')
 
 
 def _latency_text(lat):

@@ -3,11 +3,14 @@
 # Run by bench/soak.py, one process each:
 #   python bench/soak_nodes.py regulator_bridge --ros-args ...   (the bridge, sim backend)
 #   python bench/soak_nodes.py virtual_object --ros-args ...     (gripper_demo's object)
+#   python bench/soak_nodes.py model_node --ros-args ...         (and gripper_controller,
+#                                                                  mcap_recorder)
 # or, with soak.py --composed, every node in one process as the `gripper` executable runs
 # them (with --record --virtual-object):
 #   python bench/soak_nodes.py gripper --ros-args ...
-# The bridge is fpc_gripper's RegulatorBridge, unchanged, built and spun by the package's
-# run_node exactly as `regulator_bridge` is; it only gets one more subscription,
+# Every node is fpc_gripper's, unchanged, built and spun by the package's run_node exactly
+# as its executable does, with a heap log (below) when asked. The bridge only gets one
+# more subscription,
 # `soak/regulator_fault` (std_msgs/String, JSON), through which the soak injects faults
 # into the simulated backend (SimulatedRegulator.inject_fault) from another process:
 #   {"kind": "disconnect" | "bad_readback" | "leak" | "stuck_sensor", "channel": 0,
@@ -30,6 +33,10 @@ from std_msgs.msg import String
 
 from fpc_gripper.nodes.gripper import bridge_exit_code
 from fpc_gripper.nodes.gripper import compose
+from fpc_gripper.nodes.gripper_controller import GripperController
+from fpc_gripper.nodes.heap_trim import HeapTrim
+from fpc_gripper.nodes.mcap_recorder import McapRecorder
+from fpc_gripper.nodes.model_node import ModelNode
 from fpc_gripper.nodes.regulator_bridge import activation_exit_code
 from fpc_gripper.nodes.regulator_bridge import RegulatorBridge
 from fpc_gripper.nodes.runner import run_node
@@ -99,8 +106,9 @@ class HeapLog:
     Each line: ``t`` (CLOCK_MONOTONIC, the soak's clock too) [s]; glibc's bytes in use
     (``in_use_mib``: every arena's allocated chunks and the mmapped ones), held free in
     its arenas (``free_mib``) and mmapped (``mmapped_mib``), all in MiB; and pymalloc's
-    live blocks (``pymalloc_blocks``). On the executor's thread, so the sampling makes no
-    allocator arena of its own.
+    live blocks (``pymalloc_blocks``); the process's heap trims so far (``trim_count``,
+    ``trim_max_s``, ``trim_total_s``: `HeapTrim.process`). On the executor's thread, so
+    the sampling makes no allocator arena of its own.
     """
 
     def __init__(self, node, path, period_s):
@@ -115,6 +123,7 @@ class HeapLog:
             info = self._mallinfo()
             line.update(in_use_mib=(info.uordblks + info.hblkhd) / 2 ** 20,
                         free_mib=info.fordblks / 2 ** 20, mmapped_mib=info.hblkhd / 2 ** 20)
+        line.update({f'trim_{key}': value for key, value in HeapTrim.process.items()})
         self._file.write(json.dumps(line) + '\n')
 
 
@@ -123,6 +132,13 @@ def _heap_log(node):
     if path:
         node.soak_heap_log = HeapLog(node, path,
                                      float(os.environ.get('FPC_SOAK_HEAP_PERIOD_S', '5')))
+    return node
+
+
+#: The nodes run as their own executables run them (their `main`), with a heap log.
+PLAIN = {'model_node': ModelNode, 'gripper_controller': GripperController,
+         'mcap_recorder': McapRecorder,
+         'virtual_object': functools.partial(VirtualObjectNode, 'virtual_object')}
 
 
 def _gripper_with_hook():
@@ -151,11 +167,10 @@ def main(argv=None):
                         check=activation_exit_code)
     if kind == 'gripper':
         return run_node(_gripper_with_hook, 'gripper', argv, check=bridge_exit_code)
-    if kind == 'virtual_object':
-        return run_node(functools.partial(VirtualObjectNode, 'virtual_object'),
-                        'virtual_object', argv)
-    print('usage: soak_nodes.py {regulator_bridge|virtual_object|gripper} [--ros-args ...]',
-          file=sys.stderr)
+    if kind in PLAIN:
+        return run_node(lambda: _heap_log(PLAIN[kind]()), kind, argv)
+    print(f'usage: soak_nodes.py {{{"|".join(("regulator_bridge", "gripper", *PLAIN))}}} '
+          '[--ros-args ...]', file=sys.stderr)
     return 2
 
 

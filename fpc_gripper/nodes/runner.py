@@ -17,6 +17,7 @@ from rclpy.logging import get_logger
 from rclpy.signals import SignalHandlerOptions
 from rclpy.utilities import remove_ros_args
 
+from fpc_gripper.nodes.heap_trim import HeapTrim
 from fpc_gripper.nodes.middleware import apply_middleware_settings
 from fpc_gripper.safe_yaml import ConfigError
 
@@ -216,10 +217,13 @@ def run_node(build, name, args=None, check=None):
     nodes = ()
     try:
         try:
-            apply_middleware_settings()
+            settings = apply_middleware_settings()
             rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
             built = build()
             nodes = tuple(built) if isinstance(built, (list, tuple)) else (built,)
+            if 'mmap_threshold' in settings:
+                # The allocator settings' other half: pages freed amid the heap go back.
+                nodes[0].heap_trim = HeapTrim(nodes[0])
         except ConfigError as exc:
             get_logger(name).fatal(f'invalid config: {exc}')
             return 2
