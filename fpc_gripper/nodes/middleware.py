@@ -5,7 +5,7 @@ import os
 import pathlib
 
 __all__ = ['MMAP_THRESHOLD_BYTES', 'OPT_OUT_ENV', 'PROFILE', 'apply_middleware_settings',
-           'middleware_settings']
+           'middleware_settings', 'settings_wanted']
 
 #: Set to ``0`` to leave Fast DDS's profile and glibc's allocator as the environment has them.
 OPT_OUT_ENV = 'FPC_GRIPPER_MIDDLEWARE_SETTINGS'
@@ -22,6 +22,11 @@ _USER_FASTDDS_ENV = ('FASTRTPS_DEFAULT_PROFILES_FILE', 'FASTDDS_DEFAULT_PROFILES
 #: are freed: after one burst of 1 MB messages the process kept their memory.
 _M_MMAP_THRESHOLD = -3
 MMAP_THRESHOLD_BYTES = 128 * 1024
+
+
+def settings_wanted(environ):
+    """Whether the process makes its own middleware and allocator settings (no opt-out)."""
+    return environ.get(OPT_OUT_ENV, '1') != '0'
 
 
 def middleware_settings(environ):
@@ -43,7 +48,7 @@ def middleware_settings(environ):
         is already set (glibc applied it at start).
 
     """
-    if environ.get(OPT_OUT_ENV, '1') == '0':
+    if not settings_wanted(environ):
         return {}, None
     env = {}
     if environ.get('RMW_IMPLEMENTATION', '') in _FASTDDS_RMWS \

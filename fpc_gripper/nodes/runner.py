@@ -19,6 +19,7 @@ from rclpy.utilities import remove_ros_args
 
 from fpc_gripper.nodes.heap_trim import HeapTrim
 from fpc_gripper.nodes.middleware import apply_middleware_settings
+from fpc_gripper.nodes.middleware import settings_wanted
 from fpc_gripper.safe_yaml import ConfigError
 
 __all__ = ['EXECUTOR_ENV', 'FORCE_AFTER_S', 'START_ERRORS', 'StopRequest', 'make_executor',
@@ -217,11 +218,11 @@ def run_node(build, name, args=None, check=None):
     nodes = ()
     try:
         try:
-            settings = apply_middleware_settings()
+            apply_middleware_settings()
             rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
             built = build()
             nodes = tuple(built) if isinstance(built, (list, tuple)) else (built,)
-            if 'mmap_threshold' in settings:
+            if settings_wanted(os.environ):
                 # The allocator settings' other half: pages freed amid the heap go back.
                 nodes[0].heap_trim = HeapTrim(nodes[0])
         except ConfigError as exc:

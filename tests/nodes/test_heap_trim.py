@@ -117,12 +117,15 @@ print(json.dumps({'code': code, **seen}))
 
 
 @pytest.mark.skipif(not GLIBC, reason='needs glibc (malloc_trim)')
-@pytest.mark.parametrize('opt_out, trimmed', [(None, True), ('0', False)])
-def test_run_node_trims_with_the_allocator_settings_only(opt_out, trimmed):
+@pytest.mark.parametrize('env, trimmed', [
+    ({}, True), ({OPT_OUT_ENV: '1'}, True),
+    # a threshold of the user's own is kept (middleware.py); the trim still runs
+    ({'MALLOC_MMAP_THRESHOLD_': '65536'}, True),
+    ({OPT_OUT_ENV: '0'}, False)])
+def test_run_node_trims_unless_the_settings_are_opted_out(env, trimmed):
     environ = {k: v for k, v in os.environ.items()
                if k not in (OPT_OUT_ENV, 'MALLOC_MMAP_THRESHOLD_')}
-    if opt_out is not None:
-        environ[OPT_OUT_ENV] = opt_out
+    environ.update(env)
     done = subprocess.run([sys.executable, '-c', _RUN_NODE], env=environ, capture_output=True,
                           text=True, timeout=120)
     assert done.returncode == 0, done.stderr
