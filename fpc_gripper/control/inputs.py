@@ -9,6 +9,7 @@ from fpc_gripper.services.input_limits import check_tip_force_value
 from fpc_gripper.services.input_limits import checked_bounds
 from fpc_gripper.services.input_limits import DEFAULT_BOUNDS
 from fpc_gripper.services.input_limits import InputCheck
+from fpc_gripper.services.input_limits import lost_detail
 from fpc_gripper.services.input_limits import real_or_none
 from fpc_gripper.services.input_limits import Rejection
 from fpc_gripper.services.logs import bounded
@@ -56,7 +57,6 @@ class ControllerInputs:
         self.stamp = [None] * n
         self.tip_force = [(0.0, 0.0)] * n
         self.rejected = 0
-        self.lost_messages = 0
         self.last_rejection = 'none'
         self._problems = {}
         self._lost = {}
@@ -151,11 +151,8 @@ class ControllerInputs:
     def lost(self, source, count):
         """Record `count` messages of `source` that the middleware lost; return the check."""
         count = max(int(count), 0)
-        self.lost_messages += count
         self._lost[source] = self._lost.get(source, 0) + count
-        return self.reject(source, Rejection.LOST,
-                           f'{count} message(s) lost ({self._lost[source]} in all): the '
-                           'middleware could not deliver them')
+        return self.reject(source, Rejection.LOST, lost_detail(count, self._lost[source]))
 
     def _goal(self, source, setter, value, now):
         number = real_or_none(value)
@@ -181,6 +178,11 @@ class ControllerInputs:
         return False
 
     # -- outputs ----------------------------------------------------------------------------
+
+    @property
+    def lost_messages(self):
+        """Messages the middleware lost, over every source."""
+        return sum(self._lost.values())
 
     @property
     def problems(self):

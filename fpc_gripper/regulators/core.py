@@ -14,6 +14,7 @@ from fpc_gripper.services.input_limits import check_frame
 from fpc_gripper.services.input_limits import checked_bounds
 from fpc_gripper.services.input_limits import DEFAULT_BOUNDS
 from fpc_gripper.services.input_limits import InputCheck
+from fpc_gripper.services.input_limits import lost_detail
 from fpc_gripper.services.input_limits import Rejection
 from fpc_gripper.services.logs import bounded
 
@@ -277,9 +278,7 @@ class RegulatorCore:
         channel = self._channels[index]
         count = max(int(count), 0)
         channel.lost += count
-        check = InputCheck(None, Rejection.LOST,
-                           f'{count} command(s) lost ({channel.lost} in all): the middleware '
-                           'could not deliver them')
+        check = InputCheck(None, Rejection.LOST, lost_detail(count, channel.lost, 'command'))
         channel.rejection = channel.last_rejection = f'{check.rejection.value}: {check.detail}'
         return check
 

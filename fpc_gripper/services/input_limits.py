@@ -17,7 +17,7 @@ from fpc_gripper.services.logs import bounded
 __all__ = ['BOUND_NAMES', 'DEFAULT_BOUNDS', 'InputBounds', 'InputCheck', 'MAX_STAMP_NS',
            'MAX_STAMP_SEC', 'Rejection', 'atmospheric_pressure_row', 'check_absolute_pressure',
            'check_frame', 'check_stamp', 'check_tip_force_value', 'checked_bounds',
-           'input_bound_table', 'real_or_none', 'stale_detail']
+           'input_bound_table', 'lost_detail', 'real_or_none', 'stale_detail']
 
 #: Largest ``builtin_interfaces/Time.sec`` (an int32) [s].
 MAX_STAMP_SEC = 2 ** 31 - 1
@@ -215,6 +215,11 @@ def checked_bounds(bounds, frames=()):
         raise ValueError(f'`max_frame_id_length` must be >= {longest} [characters], the '
                          f'longest finger frame, got {bounds.max_frame_id_length}')
     return bounds
+
+
+def lost_detail(count, total, what='message'):
+    """Say that the middleware lost `count` of an input's `what`s, `total` so far."""
+    return f'{count} {what}(s) lost ({total} in all): the middleware could not deliver them'
 
 
 def stale_detail(stamp_ns, now_ns, stale_after_s):

@@ -20,6 +20,7 @@ from fpc_gripper.services.input_limits import checked_bounds
 from fpc_gripper.services.input_limits import DEFAULT_BOUNDS
 from fpc_gripper.services.input_limits import InputBounds
 from fpc_gripper.services.input_limits import InputCheck
+from fpc_gripper.services.input_limits import lost_detail
 from fpc_gripper.services.input_limits import MAX_STAMP_NS
 from fpc_gripper.services.input_limits import Rejection
 from fpc_gripper.services.input_limits import stale_detail
@@ -327,9 +328,7 @@ class ModelCore:
         state = self._states[index]
         count = max(int(count), 0)
         state.lost += count
-        return self.reject(index, Rejection.LOST,
-                           f'{count} message(s) lost ({state.lost} in all): the middleware '
-                           'could not deliver them', source)
+        return self.reject(index, Rejection.LOST, lost_detail(count, state.lost), source)
 
     def _record(self, state, check, source, stamp_ns, now_ns):
         if not check.accepted:
