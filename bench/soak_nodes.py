@@ -17,8 +17,8 @@
 #    "value": NaN, "rate": 1e5, "duration_s": 0.5}
 # and clears them all after duration_s.
 # With FPC_SOAK_HEAP_LOG=PATH in its environment, a process also appends its allocator's
-# state to PATH every FPC_SOAK_HEAP_PERIOD_S (HeapLog), so that the soak can tell memory
-# in use from memory the allocator holds free.
+# state to PATH every HEAP_LOG_PERIOD_S (HeapLog), so that the soak can tell memory in use
+# from memory the allocator holds free.
 
 import ctypes
 import functools
@@ -82,6 +82,10 @@ class FaultHook:
             self.node.get_logger().info('soak faults cleared')
 
 
+#: Time between two lines of a heap log [s].
+HEAP_LOG_PERIOD_S = 5.0
+
+
 class _MallInfo2(ctypes.Structure):
     _fields_ = [(name, ctypes.c_size_t) for name in (
         'arena', 'ordblks', 'smblks', 'hblks', 'hblkhd', 'usmblks', 'fsmblks', 'uordblks',
@@ -130,8 +134,7 @@ class HeapLog:
 def _heap_log(node):
     path = os.environ.get('FPC_SOAK_HEAP_LOG')
     if path:
-        node.soak_heap_log = HeapLog(node, path,
-                                     float(os.environ.get('FPC_SOAK_HEAP_PERIOD_S', '5')))
+        node.soak_heap_log = HeapLog(node, path, HEAP_LOG_PERIOD_S)
     return node
 
 
