@@ -26,6 +26,7 @@ import json
 import os
 import sys
 import time
+import xml.etree.ElementTree as ElementTree
 
 from rclpy.qos import QoSProfile
 from rclpy.qos import ReliabilityPolicy
@@ -111,12 +112,14 @@ class HeapLog:
     (``in_use_mib``: every arena's allocated chunks and the mmapped ones), held free in
     its arenas (``free_mib``) and mmapped (``mmapped_mib``), all in MiB; and pymalloc's
     live blocks (``pymalloc_blocks``); the process's heap trims so far (``trim_count``,
-    ``trim_max_s``, ``trim_total_s``: `HeapTrim.process`). On the executor's thread, so
+    ``trim_max_s``, ``trim_total_s``: `HeapTrim.process`); and each arena's size and
+    free bytes by chunk size (``arenas``: `arena_summary`). On the executor's thread, so
     the sampling makes no allocator arena of its own.
     """
 
     def __init__(self, node, path, period_s):
         self._mallinfo = _mallinfo2()
+        self._malloc_info = _malloc_info()
         self._file = open(path, 'a', buffering=1)
         self._timer = node.create_timer(period_s, self.sample)
 
@@ -127,8 +130,75 @@ class HeapLog:
             info = self._mallinfo()
             line.update(in_use_mib=(info.uordblks + info.hblkhd) / 2 ** 20,
                         free_mib=info.fordblks / 2 ** 20, mmapped_mib=info.hblkhd / 2 ** 20)
+        if self._malloc_info is not None:
+            line['arenas'] = arena_summary(self._malloc_info())
         line.update({f'trim_{key}': value for key, value in HeapTrim.process.items()})
         self._file.write(json.dumps(line) + '\n')
+
+
+#: Upper bounds of the free-chunk size classes of `arena_summary` [bytes].
+FREE_CLASSES = (1024, 4096, 65536)
+
+
+def _malloc_info():
+    """Return a call that gives glibc's ``malloc_info`` XML, or None where there is none."""
+    try:
+        libc = ctypes.CDLL(None)
+        info, memstream, fclose, free = (libc.malloc_info, libc.open_memstream, libc.fclose,
+                                         libc.free)
+    except (AttributeError, OSError):
+        return None
+    memstream.restype = ctypes.c_void_p
+    memstream.argtypes = (ctypes.POINTER(ctypes.c_void_p), ctypes.POINTER(ctypes.c_size_t))
+    info.argtypes = (ctypes.c_int, ctypes.c_void_p)
+    fclose.argtypes = (ctypes.c_void_p,)
+    free.argtypes = (ctypes.c_void_p,)
+
+    def read():
+        buffer, size = ctypes.c_void_p(), ctypes.c_size_t()
+        stream = memstream(ctypes.byref(buffer), ctypes.byref(size))
+        if not stream:
+            return '<malloc/>'
+        try:
+            info(0, stream)
+        finally:
+            fclose(stream)   # sets buffer and size
+        try:
+            return ctypes.string_at(buffer, size.value).decode()
+        finally:
+            free(buffer)
+    return read
+
+
+def arena_summary(xml):
+    """
+    Each arena of a ``malloc_info`` document: its size and its free bytes by chunk size.
+
+    A list, one dict per ``<heap>``: ``nr``; ``system_mib``, the memory the arena has from
+    the kernel now; ``free_mib``, all its free bytes (fast bins and the rest, which holds
+    the top chunk); ``free_by_size_mib``, the binned free bytes in chunks of at most 1 KiB,
+    4 KiB, 64 KiB and more (`FREE_CLASSES`: what ``malloc_trim`` can give back is in the
+    larger ones); ``unsorted_mib``, the chunks not yet binned; and ``top_mib``, the top
+    chunk (the rest: glibc counts it in the free bytes and lists it in no bin).
+    """
+    arenas = []
+    for heap in ElementTree.fromstring(xml).iter('heap'):
+        by_size = [0] * (len(FREE_CLASSES) + 1)
+        for size in heap.iter('size'):
+            slot = next((i for i, bound in enumerate(FREE_CLASSES)
+                         if int(size.get('to')) <= bound), len(FREE_CLASSES))
+            by_size[slot] += int(size.get('total'))
+        unsorted = sum(int(u.get('total')) for u in heap.iter('unsorted'))
+        totals = {t.get('type'): int(t.get('size')) for t in heap.findall('total')}
+        system = {t.get('type'): int(t.get('size')) for t in heap.findall('system')}
+        free = totals.get('fast', 0) + totals.get('rest', 0)
+        arenas.append({'nr': int(heap.get('nr')),
+                       'system_mib': system.get('current', 0) / 2 ** 20,
+                       'free_mib': free / 2 ** 20,
+                       'free_by_size_mib': [b / 2 ** 20 for b in by_size],
+                       'unsorted_mib': unsorted / 2 ** 20,
+                       'top_mib': (free - sum(by_size) - unsorted) / 2 ** 20})
+    return arenas
 
 
 def _heap_log(node):

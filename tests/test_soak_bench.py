@@ -1,5 +1,6 @@
 """The soak benchmark's own measuring parts: CDR headers, command-shape matching, the recording."""
 
+import ctypes
 import json
 import math
 import pathlib
@@ -19,7 +20,7 @@ from soak import cdr_fluid_pressure, cdr_header, LatencyTracker, NS  # noqa: E40
 from soak import FAULT_KINDS  # noqa: E402
 from soak import FaultInjector, is_junk, read_recording, recorder_counts  # noqa: E402
 from soak import heap_slopes, read_heap_log, slope_per_hour, SpilledArray  # noqa: E402
-from soak_nodes import HeapLog  # noqa: E402
+from soak_nodes import arena_summary, HeapLog  # noqa: E402
 
 from fpc_gripper.io.mcap_writer import Rosbag2McapWriter  # noqa: E402
 from fpc_gripper.io.recording_counts import RecordingCounts  # noqa: E402
@@ -303,3 +304,82 @@ def test_heap_slopes_skip_the_first_minute_and_a_cut_last_line(tmp_path):
         assert slopes['free_mib'] == pytest.approx(0.0, abs=1e-9)
         assert slopes['pymalloc_blocks'] == pytest.approx(3600.0, rel=1e-6)
     assert read_heap_log(tmp_path / 'none.jsonl', 0.0) == []
+
+
+# malloc_info's document as glibc 2.39 writes it: arena 0 with a fast bin, two bins and
+# the unsorted bin; arena 1 with its top chunk only; then the process's totals.
+_MALLOC_INFO = """<malloc version="1">
+<heap nr="0">
+<sizes>
+  <size from="33" to="48" total="480" count="10"/>
+  <size from="2049" to="2049" total="40980" count="20"/>
+  <size from="100001" to="200000" total="150000" count="1"/>
+  <unsorted from="65" to="8193" total="20000" count="5"/>
+</sizes>
+<total type="fast" count="10" size="480"/>
+<total type="rest" count="27" size="1258576"/>
+<system type="current" size="4194304"/>
+<system type="max" size="8388608"/>
+<aspace type="total" size="4194304"/>
+<aspace type="mprotect" size="4194304"/>
+</heap>
+<heap nr="1">
+<sizes>
+</sizes>
+<total type="fast" count="0" size="0"/>
+<total type="rest" count="1" size="131072"/>
+<system type="current" size="135168"/>
+<system type="max" size="135168"/>
+<aspace type="total" size="135168"/>
+<aspace type="mprotect" size="135168"/>
+</heap>
+<total type="fast" count="10" size="480"/>
+<total type="rest" count="28" size="1389648"/>
+<total type="mmap" count="2" size="1048576"/>
+<system type="current" size="4329472"/>
+<system type="max" size="8523776"/>
+<aspace type="total" size="4329472"/>
+<aspace type="mprotect" size="4329472"/>
+</malloc>
+"""
+
+
+def test_arena_summary_reads_each_arena_of_a_malloc_info_document():
+    mib = 2.0 ** -20
+    first, second = arena_summary(_MALLOC_INFO)
+    assert first['nr'] == 0 and second['nr'] == 1
+    assert first['system_mib'] == pytest.approx(4.0) and second['system_mib'] == pytest.approx(
+        135168 * mib)
+    assert first['free_mib'] == pytest.approx((480 + 1258576) * mib)
+    # <= 1 KiB: the fast bin; <= 4 KiB: the 2049-byte bin; > 64 KiB: the large one.
+    assert first['free_by_size_mib'] == pytest.approx([480 * mib, 40980 * mib, 0.0,
+                                                       150000 * mib])
+    assert first['unsorted_mib'] == pytest.approx(20000 * mib)
+    assert first['top_mib'] == pytest.approx((1258576 - 40980 - 150000 - 20000) * mib)
+    assert second['free_by_size_mib'] == [0.0] * 4
+    assert second['top_mib'] == pytest.approx(131072 * mib)
+
+
+def test_the_heap_log_sees_free_chunks_between_chunks_in_use(tmp_path):
+    """3,000-byte chunks freed between chunks in use show as free bytes of 1-4 KiB."""
+    libc = ctypes.CDLL(None)
+    libc.malloc.restype, libc.malloc.argtypes = ctypes.c_void_p, (ctypes.c_size_t,)
+    libc.free.argtypes = (ctypes.c_void_p,)
+    node = _TimerNode()
+    log = HeapLog(node, tmp_path / 'h.jsonl', 5.0)
+    log.sample()
+    blocks = [libc.malloc(3000) for _ in range(2000)]
+    for block in blocks[::2]:
+        libc.free(block)
+    libc.free(libc.malloc(100_000))     # sorts the unsorted chunks into their bins
+    log.sample()
+    for block in blocks[1::2]:
+        libc.free(block)
+    before, after = (line['arenas'][0] for line in read_heap_log(tmp_path / 'h.jsonl', 0.0))
+
+    def between(arena):
+        return arena['free_by_size_mib'][1] + arena['unsorted_mib']
+
+    # 1,000 free chunks of 3,008 bytes (3,000 and glibc's 8-byte header, 16-aligned).
+    assert between(after) - between(before) == pytest.approx(1000 * 3008 / 2 ** 20, rel=0.1)
+    assert after['system_mib'] >= after['free_mib'] > 2.8
