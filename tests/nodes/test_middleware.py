@@ -9,32 +9,80 @@ import sys
 import pytest
 
 from fpc_gripper.nodes.middleware import (apply_middleware_settings, middleware_settings,
-                                          MMAP_THRESHOLD_BYTES, OPT_OUT_ENV, PROFILE)
+                                          OPT_OUT_ENV, PROFILE)
 
 PROFILE_ENV = {'FASTRTPS_DEFAULT_PROFILES_FILE': str(PROFILE),
                'RMW_FASTRTPS_USE_QOS_FROM_XML': '1'}
+ALLOCATOR = {'mmap_threshold': 131072, 'arena_max': 1}
+_OWN_ALLOCATOR_ENV = ('MALLOC_MMAP_THRESHOLD_', 'MALLOC_ARENA_MAX')
 
 
-@pytest.mark.parametrize('environ, env, threshold', [
-    ({}, PROFILE_ENV, MMAP_THRESHOLD_BYTES),
-    ({'RMW_IMPLEMENTATION': 'rmw_fastrtps_cpp'}, PROFILE_ENV, MMAP_THRESHOLD_BYTES),
-    ({'RMW_IMPLEMENTATION': 'rmw_cyclonedds_cpp'}, {}, MMAP_THRESHOLD_BYTES),
-    ({'FASTRTPS_DEFAULT_PROFILES_FILE': '/etc/mine.xml'}, {}, MMAP_THRESHOLD_BYTES),
-    ({'RMW_FASTRTPS_USE_QOS_FROM_XML': '0'}, {}, MMAP_THRESHOLD_BYTES),
-    ({'RMW_FASTRTPS_PUBLICATION_MODE': 'ASYNCHRONOUS'}, {}, MMAP_THRESHOLD_BYTES),
-    ({'MALLOC_MMAP_THRESHOLD_': '65536'}, PROFILE_ENV, None),
-    ({OPT_OUT_ENV: '0'}, {}, None),
+@pytest.mark.parametrize('environ, env, allocator', [
+    ({}, PROFILE_ENV, ALLOCATOR),
+    ({'RMW_IMPLEMENTATION': 'rmw_fastrtps_cpp'}, PROFILE_ENV, ALLOCATOR),
+    ({'RMW_IMPLEMENTATION': 'rmw_cyclonedds_cpp'}, {}, ALLOCATOR),
+    ({'FASTRTPS_DEFAULT_PROFILES_FILE': '/etc/mine.xml'}, {}, ALLOCATOR),
+    ({'RMW_FASTRTPS_USE_QOS_FROM_XML': '0'}, {}, ALLOCATOR),
+    ({'RMW_FASTRTPS_PUBLICATION_MODE': 'ASYNCHRONOUS'}, {}, ALLOCATOR),
+    ({'MALLOC_MMAP_THRESHOLD_': '65536'}, PROFILE_ENV, {'arena_max': 1}),
+    ({'MALLOC_ARENA_MAX': '4'}, PROFILE_ENV, {'mmap_threshold': 131072}),
+    ({OPT_OUT_ENV: '0'}, {}, {}),
 ])
-def test_settings_apply_only_where_nobody_else_chose(environ, env, threshold):
-    assert middleware_settings(environ) == (env, threshold)
+def test_settings_apply_only_where_nobody_else_chose(environ, env, allocator):
+    assert middleware_settings(environ) == (env, allocator)
 
 
 def test_apply_sets_the_variables_in_the_environment_it_is_given():
-    environ = {'RMW_IMPLEMENTATION': 'rmw_fastrtps_cpp', 'MALLOC_MMAP_THRESHOLD_': '131072'}
+    environ = {'RMW_IMPLEMENTATION': 'rmw_fastrtps_cpp', 'MALLOC_MMAP_THRESHOLD_': '131072',
+               'MALLOC_ARENA_MAX': '2'}
     assert apply_middleware_settings(environ) == PROFILE_ENV
     assert environ == {'RMW_IMPLEMENTATION': 'rmw_fastrtps_cpp',
-                       'MALLOC_MMAP_THRESHOLD_': '131072', **PROFILE_ENV}
+                       'MALLOC_MMAP_THRESHOLD_': '131072', 'MALLOC_ARENA_MAX': '2',
+                       **PROFILE_ENV}
     assert apply_middleware_settings({OPT_OUT_ENV: '0'}) == {}
+
+
+# Four threads malloc while all of them live, then glibc's malloc_stats (stderr) names
+# every arena of the process: one per thread unless arena_max holds them to one.
+_ARENAS = r"""
+import ctypes, json, sys, threading
+from fpc_gripper.nodes.middleware import apply_middleware_settings
+done = apply_middleware_settings()
+libc = ctypes.CDLL(None)
+libc.malloc.restype, libc.malloc.argtypes = ctypes.c_void_p, (ctypes.c_size_t,)
+barrier = threading.Barrier(4)
+def work():
+    barrier.wait()
+    libc.malloc(1000)
+    barrier.wait()
+threads = [threading.Thread(target=work) for _ in range(4)]
+for thread in threads:
+    thread.start()
+for thread in threads:
+    thread.join()
+sys.stderr.flush()
+libc.malloc_stats()
+print(json.dumps(done))
+"""
+
+
+def _allocator_env(**env):
+    environ = {k: v for k, v in os.environ.items()
+               if k not in (*_OWN_ALLOCATOR_ENV, OPT_OUT_ENV)}
+    return environ | env
+
+
+@pytest.mark.skipif(not hasattr(__import__('ctypes').CDLL(None), 'malloc_stats'),
+                    reason='needs glibc (malloc_stats)')
+@pytest.mark.parametrize('env, arenas', [({}, 1), ({OPT_OUT_ENV: '0'}, 5),
+                                         ({'MALLOC_ARENA_MAX': '2'}, 2)])
+def test_every_thread_shares_one_arena(env, arenas):
+    done = subprocess.run([sys.executable, '-c', _ARENAS], env=_allocator_env(**env),
+                          capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stderr
+    assert done.stderr.count('Arena ') == arenas, done.stderr
+    made = json.loads(done.stdout)
+    assert made.get('arena_max') == (1 if not env else None)
 
 
 def test_the_profile_is_installed_with_the_package():
@@ -107,7 +155,7 @@ print(json.dumps({'acked': acked, 'taken': taken, 'latest': latest,
 def _probe(**env):
     environ = {k: v for k, v in os.environ.items()
                if k not in ('FASTRTPS_DEFAULT_PROFILES_FILE', 'RMW_FASTRTPS_USE_QOS_FROM_XML',
-                            'MALLOC_MMAP_THRESHOLD_', OPT_OUT_ENV)}
+                            *_OWN_ALLOCATOR_ENV, OPT_OUT_ENV)}
     environ.update(env)
     done = subprocess.run([sys.executable, '-c', _PROBE], env=environ, capture_output=True,
                           text=True, timeout=120)
