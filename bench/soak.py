@@ -778,7 +778,9 @@ def read_heap_log(path, t0):
     """
     Return the lines of a process's heap log (soak_nodes.HeapLog), ``t`` made [s] since t0.
 
-    An empty list where there is no log (a process that bench/soak_nodes.py did not run).
+    Where a line has its arenas, it also gets ``main_arena_mib`` and ``thread_arenas_mib``:
+    the memory the main arena, and all the others together, have from the kernel. An empty
+    list where there is no log (a process that bench/soak_nodes.py did not run).
     """
     path = pathlib.Path(path)
     if not path.exists():
@@ -790,11 +792,16 @@ def read_heap_log(path, t0):
         except ValueError:
             continue                      # the last line, cut by the stop
         line['t'] -= t0
+        arenas = line.get('arenas')
+        if arenas:
+            line['main_arena_mib'] = sum(a['system_mib'] for a in arenas if a['nr'] == 0)
+            line['thread_arenas_mib'] = sum(a['system_mib'] for a in arenas if a['nr'] != 0)
         lines.append(line)
     return lines
 
 
-HEAP_KEYS = ('in_use_mib', 'free_mib', 'pymalloc_blocks')
+HEAP_KEYS = ('in_use_mib', 'free_mib', 'pymalloc_blocks', 'main_arena_mib',
+             'thread_arenas_mib')
 
 
 def heap_slopes(lines, robust=False):
@@ -1378,7 +1385,7 @@ class Soak:
                   f'malloc in use {ls["in_use_mib"]:+.1f} ({ts["in_use_mib"]:+.1f}) MiB/h, '
                   f'held free {ls["free_mib"]:+.1f} ({ts["free_mib"]:+.1f}) MiB/h, pymalloc '
                   f'blocks {ls["pymalloc_blocks"]:+.0f} ({ts["pymalloc_blocks"]:+.0f}) /h'
-                  f'{_trim_text(log["samples"][-1])}')
+                  f'{_arena_text(log["samples"][-1], ls, ts)}{_trim_text(log["samples"][-1])}')
         for crash in self.crashes:
             print(f'CRASH: {crash["node"]} exited {crash["exit_code"]} at {crash["t"]:.1f} s; '
                   f'log tail:\n{crash["log_tail"][-1500:]}')
@@ -1389,6 +1396,16 @@ class Soak:
                          for p in results['processes'].values())
                  and recording.get('closed') and recording.get('decode_failures') == 0)
         return 0 if clean else 1
+
+
+def _arena_text(line, ls, ts):
+    """Describe the arenas' slopes, least squares (`ls`) and Theil-Sen (`ts`), if logged."""
+    arenas = line.get('arenas')
+    if not arenas:
+        return ''
+    return (f'; {len(arenas)} arenas: the main one {ls["main_arena_mib"]:+.1f} '
+            f'({ts["main_arena_mib"]:+.1f}) MiB/h, the others {ls["thread_arenas_mib"]:+.1f} '
+            f'({ts["thread_arenas_mib"]:+.1f}) MiB/h')
 
 
 def _trim_text(line):

@@ -306,6 +306,24 @@ def test_heap_slopes_skip_the_first_minute_and_a_cut_last_line(tmp_path):
     assert read_heap_log(tmp_path / 'none.jsonl', 0.0) == []
 
 
+def test_heap_slopes_of_the_main_arena_and_the_others(tmp_path):
+    path = tmp_path / 'h.jsonl'
+    # The main arena flat at 130 MiB; two thread arenas, one growing 3 MiB in 30 minutes.
+    rows = [{'t': float(t), 'in_use_mib': 100.0, 'free_mib': 5.0, 'pymalloc_blocks': 1000,
+             'arenas': [{'nr': 0, 'system_mib': 130.0}, {'nr': 4, 'system_mib': 0.5},
+                        {'nr': 9, 'system_mib': 1.0 + 3.0 * t / 1800.0}]}
+            for t in range(0, 1800, 5)]
+    path.write_text(''.join(json.dumps(r) + '\n' for r in rows))
+    lines = read_heap_log(path, t0=0.0)
+    assert lines[0]['main_arena_mib'] == 130.0 and lines[0]['thread_arenas_mib'] == 1.5
+    slopes = heap_slopes(lines)
+    assert slopes['main_arena_mib'] == pytest.approx(0.0, abs=1e-9)
+    assert slopes['thread_arenas_mib'] == pytest.approx(6.0, rel=1e-6)
+    # a log from before the arenas were logged has neither
+    assert math.isnan(heap_slopes([{k: v for k, v in r.items() if k != 'arenas'}
+                                   for r in rows])['thread_arenas_mib'])
+
+
 # malloc_info's document as glibc 2.39 writes it: arena 0 with a fast bin, two bins and
 # the unsorted bin; arena 1 with its top chunk only; then the process's totals.
 _MALLOC_INFO = """<malloc version="1">
