@@ -28,20 +28,26 @@ import sys
 import time
 import xml.etree.ElementTree as ElementTree
 
-from rclpy.qos import QoSProfile
-from rclpy.qos import ReliabilityPolicy
-from std_msgs.msg import String
+from fpc_gripper.nodes.middleware import apply_allocator_settings
 
-from fpc_gripper.nodes.gripper import bridge_exit_code
-from fpc_gripper.nodes.gripper import compose
-from fpc_gripper.nodes.gripper_controller import GripperController
-from fpc_gripper.nodes.heap_trim import HeapTrim
-from fpc_gripper.nodes.mcap_recorder import McapRecorder
-from fpc_gripper.nodes.model_node import ModelNode
-from fpc_gripper.nodes.regulator_bridge import activation_exit_code
-from fpc_gripper.nodes.regulator_bridge import RegulatorBridge
-from fpc_gripper.nodes.runner import run_node
-from fpc_gripper.nodes.virtual_object import VirtualObjectNode
+if __name__ == '__main__':
+    # As the nodes' console scripts do, before the imports below start threads.
+    apply_allocator_settings()
+
+from rclpy.qos import QoSProfile  # noqa: E402, I100
+from rclpy.qos import ReliabilityPolicy  # noqa: E402
+from std_msgs.msg import String  # noqa: E402
+
+from fpc_gripper.nodes.gripper import bridge_exit_code  # noqa: E402
+from fpc_gripper.nodes.gripper import compose  # noqa: E402
+from fpc_gripper.nodes.gripper_controller import GripperController  # noqa: E402
+from fpc_gripper.nodes.heap_trim import HeapTrim  # noqa: E402
+from fpc_gripper.nodes.mcap_recorder import McapRecorder  # noqa: E402
+from fpc_gripper.nodes.model_node import ModelNode  # noqa: E402
+from fpc_gripper.nodes.regulator_bridge import activation_exit_code  # noqa: E402
+from fpc_gripper.nodes.regulator_bridge import RegulatorBridge  # noqa: E402
+from fpc_gripper.nodes.runner import run_node  # noqa: E402
+from fpc_gripper.nodes.virtual_object import VirtualObjectNode  # noqa: E402
 
 FAULT_TOPIC = 'soak/regulator_fault'
 _FAULT_QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)

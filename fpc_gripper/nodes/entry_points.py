@@ -3,6 +3,8 @@
 import importlib
 import signal
 
+from fpc_gripper.nodes.middleware import apply_allocator_settings
+
 __all__ = ['gripper', 'gripper_controller', 'gripper_demo', 'mcap_recorder', 'model_node',
            'regulator_bridge', 'virtual_object']
 
@@ -17,7 +19,13 @@ def _stop_while_importing(signum, frame):
 
 
 def _run(module):
-    """Import ``fpc_gripper.nodes.<module>`` under `_stop_while_importing`, then run main."""
+    """
+    Import ``fpc_gripper.nodes.<module>`` under `_stop_while_importing`, then run main.
+
+    The allocator settings come first: the imports start threads (numpy's BLAS, rclpy's),
+    and a thread keeps the malloc arena it first allocates in.
+    """
+    apply_allocator_settings()
     for signum in _STOP_SIGNALS:
         signal.signal(signum, _stop_while_importing)
     # main replaces the handlers with its own (run_node's StopRequest, the demo's) before

@@ -5,7 +5,8 @@ import os
 import pathlib
 
 __all__ = ['ALLOCATOR_SETTINGS', 'MMAP_THRESHOLD_BYTES', 'OPT_OUT_ENV', 'PROFILE',
-           'apply_middleware_settings', 'middleware_settings', 'settings_wanted']
+           'apply_allocator_settings', 'apply_middleware_settings', 'middleware_settings',
+           'settings_wanted']
 
 #: Set to ``0`` to leave Fast DDS's profile and glibc's allocator as the environment has them.
 OPT_OUT_ENV = 'FPC_GRIPPER_MIDDLEWARE_SETTINGS'
@@ -68,23 +69,24 @@ def middleware_settings(environ):
     return env, allocator
 
 
-def apply_middleware_settings(environ=os.environ):
+def apply_allocator_settings(environ=os.environ):
     """
-    Make `middleware_settings` in this process; call before ``rclpy.init``.
+    Make the allocator half of `middleware_settings` in this process.
 
-    Before rclpy starts the middleware's threads, so that ``arena_max`` holds for all of
-    them. The variables also reach the processes this one starts. The allocator settings
-    are made only where the C library is glibc (``mallopt`` found); elsewhere skipped.
+    Call it before anything starts a thread (numpy's BLAS and rclpy start some when they are
+    imported): a thread keeps the arena it has, so ``arena_max`` holds only for threads
+    that first allocate after it. The nodes' console scripts call it before they import
+    anything else; `apply_middleware_settings` calls it again. Made only where the C
+    library is glibc (``mallopt`` found); elsewhere skipped.
 
     Returns
     -------
     dict
-        What was set: the variables, and each allocator setting that was made.
+        Each allocator setting that was made, name to value.
 
     """
-    env, allocator = middleware_settings(environ)
-    environ.update(env)
-    done = dict(env)
+    _, allocator = middleware_settings(environ)
+    done = {}
     if allocator:
         try:
             mallopt = ctypes.CDLL(None).mallopt
@@ -94,3 +96,21 @@ def apply_middleware_settings(environ=os.environ):
             if mallopt(ALLOCATOR_SETTINGS[name][0], value) == 1:
                 done[name] = value
     return done
+
+
+def apply_middleware_settings(environ=os.environ):
+    """
+    Make `middleware_settings` in this process; call before ``rclpy.init``.
+
+    The variables also reach the processes this one starts. See `apply_allocator_settings`
+    for the allocator's, which are best made earlier still.
+
+    Returns
+    -------
+    dict
+        What was set: the variables, and each allocator setting that was made.
+
+    """
+    env, _ = middleware_settings(environ)
+    environ.update(env)
+    return {**env, **apply_allocator_settings(environ)}

@@ -66,6 +66,36 @@ print(json.dumps(done))
 """
 
 
+# The nodes' console scripts: a node module whose import starts threads, as numpy's and
+# rclpy's do, and whose main then allocates on four threads of its own.
+_CONSOLE_SCRIPT = r"""
+import ctypes, sys, threading, types
+from fpc_gripper.nodes import entry_points
+
+def main():
+    import numpy, rclpy
+    libc = ctypes.CDLL(None)
+    libc.malloc.restype, libc.malloc.argtypes = ctypes.c_void_p, (ctypes.c_size_t,)
+    barrier = threading.Barrier(4)
+    def work():
+        barrier.wait()
+        libc.malloc(1000)
+        barrier.wait()
+    threads = [threading.Thread(target=work) for _ in range(4)]
+    for thread in threads:
+        thread.start()
+    for thread in threads:
+        thread.join()
+    sys.stderr.flush()
+    libc.malloc_stats()
+    return 0
+
+entry_points.importlib = types.SimpleNamespace(
+    import_module=lambda name: types.SimpleNamespace(main=main))
+sys.exit(entry_points.model_node())
+"""
+
+
 def _allocator_env(**env):
     environ = {k: v for k, v in os.environ.items()
                if k not in (*_OWN_ALLOCATOR_ENV, OPT_OUT_ENV)}
@@ -196,3 +226,17 @@ def test_a_broken_profile_is_reported_by_fast_dds(tmp_path):
                          RMW_FASTRTPS_USE_QOS_FROM_XML='1')
     assert 'XMLPARSER' in log
     assert result['latest'] == ['4']
+
+
+@pytest.mark.skipif(not hasattr(__import__('ctypes').CDLL(None), 'malloc_stats'),
+                    reason='needs glibc (malloc_stats)')
+def test_the_console_scripts_share_one_arena_from_before_their_imports():
+    arenas = {}
+    for opt_out in ('1', '0'):
+        done = subprocess.run([sys.executable, '-c', _CONSOLE_SCRIPT],
+                              env=_allocator_env(**{OPT_OUT_ENV: opt_out}),
+                              capture_output=True, text=True, timeout=120)
+        assert done.returncode == 0, done.stderr
+        arenas[opt_out] = done.stderr.count('Arena ')
+    # Without the settings, the four (and the imports' threads) take arenas of their own.
+    assert arenas['1'] == 1 and arenas['0'] >= 5, arenas
