@@ -26,8 +26,8 @@ _USER_FASTDDS_ENV = ('FASTRTPS_DEFAULT_PROFILES_FILE', 'FASTDDS_DEFAULT_PROFILES
 #:   burst of 1 MB messages the process kept their memory.
 #: - ``arena_max``: glibc gives each new thread an arena of its own (up to 8 per core),
 #:   and ``malloc_trim`` gives back only the free pages inside an arena, never the top of
-#:   a thread's arena: in the composed gripper one DDS thread's arena grew from 0.4 to
-#:   1.8 MiB in 18 minutes, most of it free at its top. One arena for every thread puts
+#:   a thread's arena: in the composed gripper one thread's arena grew from 0.4 to 2.0
+#:   MiB in 25 minutes, most of it free at its top. One arena for every thread puts
 #:   all free memory where the heap trim reaches it.
 ALLOCATOR_SETTINGS = {'mmap_threshold': (-3, 128 * 1024, 'MALLOC_MMAP_THRESHOLD_'),
                       'arena_max': (-8, 1, 'MALLOC_ARENA_MAX')}
