@@ -324,7 +324,7 @@ def test_heap_slopes_of_the_main_arena_and_the_others(tmp_path):
                                    for r in rows])['thread_arenas_mib'])
 
 
-# malloc_info's document as glibc 2.39 writes it: arena 0 with a fast bin, two bins and
+# malloc_info's document as glibc 2.36 writes it: arena 0 with a fast bin, two bins and
 # the unsorted bin; arena 1 with its top chunk only; then the process's totals.
 _MALLOC_INFO = """<malloc version="1">
 <heap nr="0">

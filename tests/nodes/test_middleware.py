@@ -44,36 +44,10 @@ def test_apply_sets_the_variables_in_the_environment_it_is_given():
 
 # Four threads malloc while all of them live, then glibc's malloc_stats (stderr) names
 # every arena of the process: one per thread unless arena_max holds them to one.
-_ARENAS = r"""
-import ctypes, json, sys, threading
-from fpc_gripper.nodes.middleware import apply_middleware_settings
-done = apply_middleware_settings()
-libc = ctypes.CDLL(None)
-libc.malloc.restype, libc.malloc.argtypes = ctypes.c_void_p, (ctypes.c_size_t,)
-barrier = threading.Barrier(4)
-def work():
-    barrier.wait()
-    libc.malloc(1000)
-    barrier.wait()
-threads = [threading.Thread(target=work) for _ in range(4)]
-for thread in threads:
-    thread.start()
-for thread in threads:
-    thread.join()
-sys.stderr.flush()
-libc.malloc_stats()
-print(json.dumps(done))
-"""
+_ALLOCATE_ON_FOUR_THREADS = r"""
+import ctypes, sys, threading
 
-
-# The nodes' console scripts: a node module whose import starts threads, as numpy's and
-# rclpy's do, and whose main then allocates on four threads of its own.
-_CONSOLE_SCRIPT = r"""
-import ctypes, sys, threading, types
-from fpc_gripper.nodes import entry_points
-
-def main():
-    import numpy, rclpy
+def allocate_on_four_threads():
     libc = ctypes.CDLL(None)
     libc.malloc.restype, libc.malloc.argtypes = ctypes.c_void_p, (ctypes.c_size_t,)
     barrier = threading.Barrier(4)
@@ -88,6 +62,23 @@ def main():
         thread.join()
     sys.stderr.flush()
     libc.malloc_stats()
+"""
+_ARENAS = _ALLOCATE_ON_FOUR_THREADS + r"""
+import json
+from fpc_gripper.nodes.middleware import apply_middleware_settings
+done = apply_middleware_settings()
+allocate_on_four_threads()
+print(json.dumps(done))
+"""
+# The nodes' console scripts: a node module whose import starts threads, as numpy's and
+# rclpy's do, and whose main then allocates on four threads of its own.
+_CONSOLE_SCRIPT = _ALLOCATE_ON_FOUR_THREADS + r"""
+import types
+from fpc_gripper.nodes import entry_points
+
+def main():
+    import numpy, rclpy
+    allocate_on_four_threads()
     return 0
 
 entry_points.importlib = types.SimpleNamespace(
