@@ -1,9 +1,10 @@
 """The soak benchmark's own measuring parts: CDR headers, command-shape matching, the recording."""
 
-import ctypes
 import json
 import math
+import os
 import pathlib
+import subprocess
 import sys
 import threading
 import types
@@ -15,7 +16,8 @@ import pytest
 from rclpy.serialization import serialize_message
 from sensor_msgs.msg import FluidPressure
 
-sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1] / 'bench'))
+BENCH = pathlib.Path(__file__).resolve().parents[1] / 'bench'
+sys.path.insert(0, str(BENCH))
 from soak import cdr_fluid_pressure, cdr_header, LatencyTracker, NS  # noqa: E402, I100
 from soak import FAULT_KINDS  # noqa: E402
 from soak import FaultInjector, is_junk, read_recording, recorder_counts  # noqa: E402
@@ -282,6 +284,8 @@ def test_the_heap_log_sees_an_allocation_and_its_slopes_read_back(tmp_path):
     log.sample()
     lines = read_heap_log(path, t0=0.0)
     assert len(lines) == 3 and all(line['pymalloc_blocks'] > 0 for line in lines)
+    assert all(line['arenas'][0]['nr'] == 0 and line['arenas'][0]['system_mib'] > 0.0
+               for line in lines)
     use = [line['in_use_mib'] for line in lines]
     assert use[1] - use[0] == pytest.approx(64.0, abs=2.0)
     assert use[2] - use[0] == pytest.approx(0.0, abs=2.0)
@@ -378,26 +382,37 @@ def test_arena_summary_reads_each_arena_of_a_malloc_info_document():
     assert second['top_mib'] == pytest.approx(131072 * mib)
 
 
-def test_the_heap_log_sees_free_chunks_between_chunks_in_use(tmp_path):
+# In a process of its own, so that no other test's threads or allocator settings share
+# the arena: 2,000 chunks of 3,000 bytes, every other one freed, read before and after.
+_FREE_CHUNKS = r"""
+import ctypes, json, sys
+sys.path.insert(0, sys.argv[1])
+from soak_nodes import _malloc_info, arena_summary
+libc = ctypes.CDLL(None)
+libc.malloc.restype, libc.malloc.argtypes = ctypes.c_void_p, (ctypes.c_size_t,)
+libc.free.argtypes = (ctypes.c_void_p,)
+read = _malloc_info()
+before = arena_summary(read())[0]
+blocks = [libc.malloc(3000) for _ in range(2000)]
+for block in blocks[::2]:
+    libc.free(block)
+libc.free(libc.malloc(100_000))     # sorts the unsorted chunks into their bins
+after = arena_summary(read())[0]
+print(json.dumps([before, after]))
+"""
+
+
+def test_malloc_info_sees_free_chunks_between_chunks_in_use():
     """3,000-byte chunks freed between chunks in use show as free bytes of 1-4 KiB."""
-    libc = ctypes.CDLL(None)
-    libc.malloc.restype, libc.malloc.argtypes = ctypes.c_void_p, (ctypes.c_size_t,)
-    libc.free.argtypes = (ctypes.c_void_p,)
-    node = _TimerNode()
-    log = HeapLog(node, tmp_path / 'h.jsonl', 5.0)
-    log.sample()
-    blocks = [libc.malloc(3000) for _ in range(2000)]
-    for block in blocks[::2]:
-        libc.free(block)
-    libc.free(libc.malloc(100_000))     # sorts the unsorted chunks into their bins
-    log.sample()
-    for block in blocks[1::2]:
-        libc.free(block)
-    before, after = (line['arenas'][0] for line in read_heap_log(tmp_path / 'h.jsonl', 0.0))
+    environ = {k: v for k, v in os.environ.items() if not k.startswith('MALLOC_')}
+    done = subprocess.run([sys.executable, '-c', _FREE_CHUNKS, str(BENCH)], env=environ,
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    before, after = json.loads(done.stdout.strip().splitlines()[-1])
 
     def between(arena):
         return arena['free_by_size_mib'][1] + arena['unsorted_mib']
 
     # 1,000 free chunks of 3,008 bytes (3,000 and glibc's 8-byte header, 16-aligned).
-    assert between(after) - between(before) == pytest.approx(1000 * 3008 / 2 ** 20, rel=0.1)
+    assert between(after) - between(before) == pytest.approx(1000 * 3008 / 2 ** 20, rel=0.05)
     assert after['system_mib'] >= after['free_mib'] > 2.8
