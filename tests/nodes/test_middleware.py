@@ -88,6 +88,7 @@ sys.exit(entry_points.model_node())
 
 
 def _allocator_env(**env):
+    """This environment without the user's allocator settings or opt-out, then `env`."""
     environ = {k: v for k, v in os.environ.items()
                if k not in (*_OWN_ALLOCATOR_ENV, OPT_OUT_ENV)}
     return environ | env
@@ -174,9 +175,8 @@ print(json.dumps({'acked': acked, 'taken': taken, 'latest': latest,
 
 
 def _probe(**env):
-    environ = {k: v for k, v in os.environ.items()
-               if k not in ('FASTRTPS_DEFAULT_PROFILES_FILE', 'RMW_FASTRTPS_USE_QOS_FROM_XML',
-                            *_OWN_ALLOCATOR_ENV, OPT_OUT_ENV)}
+    environ = {k: v for k, v in _allocator_env().items()
+               if k not in ('FASTRTPS_DEFAULT_PROFILES_FILE', 'RMW_FASTRTPS_USE_QOS_FROM_XML')}
     environ.update(env)
     done = subprocess.run([sys.executable, '-c', _PROBE], env=environ, capture_output=True,
                           text=True, timeout=120)
