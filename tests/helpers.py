@@ -1,10 +1,11 @@
-"""Helpers shared by the test directories: design comparison, deviations, finite differences."""
+"""Helpers shared by the test directories: designs compared, finite differences, goals sent."""
 
 import dataclasses
 import enum
 import math
 import numbers
 import pathlib
+import time
 
 import numpy as np
 
@@ -14,6 +15,8 @@ import numpy as np
 #: over that while a real change of a design (even a YAML value rounded to 10 digits)
 #: still fails.
 DESIGN_RTOL = 1e-12
+#: A goal unanswered this long is sent again by `send_goal` [s] (a hang guard, no judgement).
+GOAL_RESEND_S = 5.0
 
 
 def assert_designs_close(actual, expected, rtol=DESIGN_RTOL, atol=0.0, where='design'):
@@ -101,3 +104,34 @@ def read_with_rosbags(path):
             out.append((connection.topic, connection.msgtype, log_time,
                         reader.deserialize(raw, connection.msgtype)))
     return out
+
+
+def spin_until(executor, condition, timeout, step=0.05):
+    """Run `executor`'s callbacks until `condition()` holds or `timeout` [s] passes: if it did."""
+    deadline = time.monotonic() + timeout
+    while not condition():
+        if time.monotonic() > deadline:
+            return False
+        executor.spin_once(timeout_sec=step)
+    return True
+
+
+def send_goal(client, goal, spin_until, attempts=12, resend_s=GOAL_RESEND_S, **kwargs):
+    """
+    Send an action goal until the server answers it; return the ClientGoalHandle.
+
+    ``client.server_is_ready()`` sees the server from the client's side only. Once, on a
+    loaded CI machine, a goal sent after it was never answered (60 s): the answer's way
+    back (the server's response writer matching the client's reader) can still be in
+    discovery, and the middleware then drops the answer. So a goal unanswered within
+    `resend_s` is sent again, up to `attempts` times; a server that did get the first one
+    takes the second as a new goal, which preempts it. `spin_until(condition, timeout)`
+    runs callbacks until `condition()` holds and says whether it did; `kwargs` go to
+    ``send_goal_async`` (a feedback callback).
+    """
+    for _ in range(attempts):
+        future = client.send_goal_async(goal, **kwargs)
+        if spin_until(future.done, resend_s):
+            return future.result()
+    raise AssertionError(f'the action server answered none of {attempts} goals sent '
+                         f'{resend_s} s apart')

@@ -11,6 +11,8 @@ from control_sim import circumdiameter, fresh_solver
 from diagnostic_msgs.msg import DiagnosticArray
 from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import WrenchStamped
+from helpers import send_goal
+from helpers import spin_until
 import numpy as np
 import pytest
 import rclpy
@@ -525,11 +527,10 @@ class GripperClient:
     def send(self, position, max_effort=0.0):
         goal = self.action.Goal()
         goal.command.position, goal.command.max_effort = position, max_effort
-        future = self.client.send_goal_async(
-            goal, feedback_callback=lambda msg: self.feedback.append(
-                (self.rig.now(), msg.feedback)))
-        self.rig._spin_until(future.done, 'no goal response')
-        return future.result()
+        return send_goal(self.client, goal,
+                         functools.partial(spin_until, self.rig.executor, step=0.01),
+                         feedback_callback=lambda msg: self.feedback.append(
+                             (self.rig.now(), msg.feedback)))
 
     def result(self, handle, within):
         future = handle.get_result_async()

@@ -1,5 +1,6 @@
 """The composed gripper: its nodes, their parameters, one process end to end, its exit codes."""
 
+import functools
 import pathlib
 import re
 import signal
@@ -13,6 +14,8 @@ from control_msgs.action import GripperCommand
 from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import WrenchStamped
 from helpers import read_with_rosbags
+from helpers import send_goal
+from helpers import spin_until
 from nav_msgs.msg import Path
 import pytest
 import rclpy
@@ -158,7 +161,7 @@ def test_the_gripper_executable_runs_the_loop_in_one_process(context, tmp_path):
                               f'{namespace}/gripper_controller/gripper_cmd')
         request = GripperCommand.Goal()
         request.command.position = 0.090
-        handle = _spin_for(executor, client.send_goal_async(request), output)
+        handle = send_goal(client, request, functools.partial(spin_until, executor))
         assert handle.accepted
         done = _spin_for(executor, handle.get_result_async(), output)
         assert done.status == GoalStatus.STATUS_SUCCEEDED, ''.join(output)

@@ -12,6 +12,8 @@ import time
 from action_msgs.msg import GoalStatus
 from control_msgs.action import GripperCommand
 from helpers import read_with_rosbags
+from helpers import send_goal
+from helpers import spin_until
 from nav_msgs.msg import Path
 import pytest
 import rclpy
@@ -98,20 +100,11 @@ def probe():
     node = rclpy.create_node('shutdown_probe', context=context)
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(node)
-    node.spin_until = functools.partial(_spin_until, executor)
+    node.spin_until = functools.partial(spin_until, executor)
     yield node
     executor.shutdown()
     node.destroy_node()
     context.try_shutdown()
-
-
-def _spin_until(executor, condition, timeout):
-    deadline = time.monotonic() + timeout
-    while not condition():
-        if time.monotonic() > deadline:
-            return False
-        executor.spin_once(timeout_sec=0.05)
-    return True
 
 
 @pytest.mark.ros
@@ -136,9 +129,9 @@ def test_every_node_exits_0_without_a_traceback(probe, tmp_path, pattern):
         assert probe.spin_until(client.server_is_ready, 60.0), nodes[2].log()
         request = GripperCommand.Goal()
         request.command.position = 0.150
-        sent = client.send_goal_async(request)
-        assert probe.spin_until(sent.done, 60.0) and sent.result().accepted
-        result = sent.result().get_result_async()
+        handle = send_goal(client, request, probe.spin_until)
+        assert handle.accepted
+        result = handle.get_result_async()
         assert probe.spin_until(lambda: shapes, 60.0), ''.join(n.log() for n in nodes)
         probe.spin_until(lambda: False, 0.3)
         for sig, delay in PATTERNS[pattern]:
