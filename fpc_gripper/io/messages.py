@@ -9,11 +9,12 @@ from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Point, PoseStamped, Vector3Stamped
 from nav_msgs.msg import Path
 import numpy as np
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import ColorRGBA, Float64
 from visualization_msgs.msg import Marker
 
 from fpc_gripper.model.validation import STANDARD_ATMOSPHERE
+
+from .qos import STATE_QOS
 
 __all__ = [
     'DEFAULT_ATMOSPHERIC_PRESSURE', 'FINGER_TOPICS', 'GRIPPER_TOPICS', 'MODEL_OUTPUT_TYPES',
@@ -22,11 +23,6 @@ __all__ = [
     'rigidity_message', 'shape_message', 'tangent_angles', 'time_to_ns',
 ]
 
-#: The model's state (shape, curvature, rigidity, markers): a late joiner gets the newest
-#: one from the publisher's history.
-STATE_QOS = QoSProfile(depth=1, history=HistoryPolicy.KEEP_LAST,
-                       reliability=ReliabilityPolicy.RELIABLE,
-                       durability=DurabilityPolicy.TRANSIENT_LOCAL)
 #: Standard atmosphere, the default for absolute-to-gauge conversion [Pa].
 DEFAULT_ATMOSPHERIC_PRESSURE = STANDARD_ATMOSPHERE
 #: Per-finger topics, relative to the node namespace, under ``finger_<i>/``.

@@ -4,21 +4,13 @@ import struct
 
 from geometry_msgs.msg import TransformStamped
 import numpy as np
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from .messages import _cdr_header, _CDR_LE, _points_and_half_angles, ns_to_time
+from .qos import TF_QOS, TF_STATIC_QOS
 
 __all__ = ['TF_QOS', 'TF_STATIC_QOS', 'TIP_SUFFIX', 'palm_transform', 'serialized_tip_tf',
            'tip_frame', 'tip_transform']
 
-#: tf2_ros's TransformBroadcaster publisher on /tf (Jazzy: QoSProfile(depth=100)).
-TF_QOS = QoSProfile(depth=100, history=HistoryPolicy.KEEP_LAST,
-                    reliability=ReliabilityPolicy.RELIABLE,
-                    durability=DurabilityPolicy.VOLATILE)
-#: tf2_ros's StaticTransformBroadcaster publisher on /tf_static.
-TF_STATIC_QOS = QoSProfile(depth=1, history=HistoryPolicy.KEEP_LAST,
-                           reliability=ReliabilityPolicy.RELIABLE,
-                           durability=DurabilityPolicy.TRANSIENT_LOCAL)
 #: A finger's tip frame is its base frame with this suffix: ``finger_<i>_tip``.
 TIP_SUFFIX = '_tip'
 

@@ -41,10 +41,7 @@ from diagnostic_msgs.msg import KeyValue
 from geometry_msgs.msg import WrenchStamped
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
-from rclpy.qos import HistoryPolicy
 from rclpy.qos import qos_profile_sensor_data
-from rclpy.qos import QoSProfile
-from rclpy.qos import ReliabilityPolicy
 from sensor_msgs.msg import FluidPressure
 from std_msgs.msg import Float64
 from visualization_msgs.msg import MarkerArray
@@ -61,7 +58,9 @@ from fpc_gripper.control.inputs import ControllerInputs
 from fpc_gripper.io.config import default_gripper_config_path
 from fpc_gripper.io.config import load_gripper_config
 from fpc_gripper.io.contact_markers import contact_marker
-from fpc_gripper.io.messages import STATE_QOS
+from fpc_gripper.io.qos import RELIABLE_QOS
+from fpc_gripper.io.qos import STATE_QOS
+from fpc_gripper.io.qos import writer_qos
 from fpc_gripper.nodes.gripper_action import GripperCommandServer
 from fpc_gripper.nodes.guard import InputGuard
 from fpc_gripper.nodes.parameters import check_change
@@ -73,9 +72,6 @@ from fpc_gripper.services.input_limits import input_bound_table
 from fpc_gripper.services.logs import NodeLog
 
 __all__ = ['GripperController', 'main']
-
-_RELIABLE = QoSProfile(depth=10, history=HistoryPolicy.KEEP_LAST,
-                       reliability=ReliabilityPolicy.RELIABLE)
 
 
 class GripperController(Node):
@@ -121,22 +117,25 @@ class GripperController(Node):
         self._last_output = None
         self._max_command = -math.inf
         self._schedule = StatusSchedule()
+        # Once a control period, kept for a recorder that stalls (sized at the start rate).
+        stream = writer_qos(RELIABLE_QOS, self._rate())
         self._command_pubs = tuple(
-            self.create_publisher(FluidPressure, f'{name}/pressure_command', _RELIABLE)
+            self.create_publisher(FluidPressure, f'{name}/pressure_command', stream)
             for name in self._names)
-        self._aperture_pub = self.create_publisher(Float64, 'aperture', _RELIABLE)
-        self._state_pub = self.create_publisher(DiagnosticStatus, 'controller_state', _RELIABLE)
-        self._diagnostics_pub = self.create_publisher(DiagnosticArray, '/diagnostics', _RELIABLE)
+        self._aperture_pub = self.create_publisher(Float64, 'aperture', stream)
+        self._state_pub = self.create_publisher(DiagnosticStatus, 'controller_state', stream)
+        self._diagnostics_pub = self.create_publisher(DiagnosticArray, '/diagnostics',
+                                                      RELIABLE_QOS)
         self._contacts_pub = self.create_publisher(MarkerArray, 'contacts', STATE_QOS)
         self._contacts = ContactDisplay(n)
         for i, (name, frame) in enumerate(zip(self._names, self._frames)):
             self._subscribe(FluidPressure, f'{name}/pressure', f'{frame}/pressure',
                             qos_profile_sensor_data, functools.partial(self._on_pressure, i))
-            self._subscribe(WrenchStamped, f'{name}/tip_force', f'{frame}/tip_force', _RELIABLE,
+            self._subscribe(WrenchStamped, f'{name}/tip_force', f'{frame}/tip_force', RELIABLE_QOS,
                             functools.partial(self._on_tip_force, i))
-        self._subscribe(Float64, 'aperture_command', 'aperture_command', _RELIABLE,
+        self._subscribe(Float64, 'aperture_command', 'aperture_command', RELIABLE_QOS,
                         self._on_aperture)
-        self._subscribe(Float64, 'grasp_force_command', 'grasp_force_command', _RELIABLE,
+        self._subscribe(Float64, 'grasp_force_command', 'grasp_force_command', RELIABLE_QOS,
                         self._on_grasp)
         try:
             self._gripper_cmd = GripperCommandServer(self, self._law, self._now, self._log)

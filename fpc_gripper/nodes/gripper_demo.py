@@ -12,9 +12,6 @@ import rclpy
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.qos import HistoryPolicy
-from rclpy.qos import QoSProfile
-from rclpy.qos import ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 from rclpy.task import Future
 from std_msgs.msg import Float64
@@ -23,6 +20,7 @@ from fpc_gripper.grasp.objects import OBJECTS
 from fpc_gripper.io.config import default_gripper_config_path
 from fpc_gripper.io.config import load_gripper_config
 from fpc_gripper.io.messages import gripper_topics
+from fpc_gripper.io.qos import RELIABLE_QOS
 from fpc_gripper.io.session_chart import make_chart
 from fpc_gripper.io.session_chart import message_count
 from fpc_gripper.nodes.gripper import bridge_exit_code
@@ -39,9 +37,6 @@ from fpc_gripper.services.session import Session
 
 __all__ = ['Phase', 'SessionScript', 'main', 'run_session']
 
-_RELIABLE = QoSProfile(depth=10, history=HistoryPolicy.KEEP_LAST,
-                       reliability=ReliabilityPolicy.RELIABLE)
-
 
 class SessionScript(Node):
     """
@@ -57,10 +52,10 @@ class SessionScript(Node):
                  **kwargs):
         super().__init__('session_script', **kwargs)
         self.done = Future()
-        self._aperture_pub = self.create_publisher(Float64, 'aperture_command', _RELIABLE)
-        self._force_pub = self.create_publisher(Float64, 'grasp_force_command', _RELIABLE)
+        self._aperture_pub = self.create_publisher(Float64, 'aperture_command', RELIABLE_QOS)
+        self._force_pub = self.create_publisher(Float64, 'grasp_force_command', RELIABLE_QOS)
         self.create_subscription(DiagnosticStatus, 'controller_state', self._on_state,
-                                 _RELIABLE)
+                                 RELIABLE_QOS)
         self._session = Session(phases, grasp_force, self._now(), dwell_s, force_band, arcs)
         self._timer = self.create_timer(0.02, self._on_timer)
 

@@ -18,6 +18,7 @@ from .runner import run_node
 from ..io.cdr import header_stamp, INVALID_STAMP
 from ..io.mcap_writer import (McapWriterError, normalize_type_name, SchemaNotFoundError,
                               type_hash_string)
+from ..io.qos import RELIABLE_QOS
 from ..io.recorder_settings import (apply_settings, compression_refusal, default_topics,
                                     open_recording, PARAMETERS)
 from ..io.recording_counts import Health, RecordingCounts
@@ -37,8 +38,6 @@ _HISTORY = HistoryPolicy.KEEP_ALL
 # Most messages taken per topic at a stop: ends a take that races a publisher.
 _STOP_TAKE_LIMIT = 100_000
 _RCLError = rclpy_implementation.RCLError
-_DIAGNOSTICS_QOS = QoSProfile(depth=10, history=HistoryPolicy.KEEP_LAST,
-                              reliability=ReliabilityPolicy.RELIABLE)
 _LEVELS = {Health.WRITES_FAILED: DiagnosticStatus.ERROR,
            Health.QUEUE_FULL: DiagnosticStatus.WARN,
            Health.MESSAGES_LOST: DiagnosticStatus.WARN,
@@ -123,7 +122,7 @@ class McapRecorder(Node):
         self._writer = self._background.writer
         if p['diagnostics_period_s'] > 0.0:
             self._diagnostics_pub = self.create_publisher(DiagnosticArray, '/diagnostics',
-                                                          _DIAGNOSTICS_QOS)
+                                                          RELIABLE_QOS)
         # Losses are logged once a period even without diagnostics.
         self.create_timer(p['diagnostics_period_s'] or 1.0, self._report_health)
         self._discovery_timer = self.create_timer(p['discovery_period_s'], self._discover)

@@ -10,15 +10,13 @@ from geometry_msgs.msg import WrenchStamped
 from rclpy.clock import Clock
 from rclpy.clock import ClockType
 from rclpy.node import Node
-from rclpy.qos import HistoryPolicy
 from rclpy.qos import qos_profile_sensor_data
-from rclpy.qos import QoSProfile
-from rclpy.qos import ReliabilityPolicy
 from sensor_msgs.msg import FluidPressure
 
 from fpc_gripper.io.config import default_gripper_config_path
 from fpc_gripper.io.config import load_gripper_config
 from fpc_gripper.io.messages import FingerPlacement
+from fpc_gripper.io.qos import RELIABLE_QOS
 from fpc_gripper.model.pipeline import finger_model
 from fpc_gripper.model.pipeline import ModelSettings
 from fpc_gripper.nodes.guard import InputGuard
@@ -34,8 +32,6 @@ from fpc_gripper.services.model_parameters import parameter_table
 from fpc_gripper.services.model_parameters import refusal
 from fpc_gripper.services.model_parameters import SOLVER_PARAMETERS
 
-_COMMAND_QOS = QoSProfile(depth=10, history=HistoryPolicy.KEEP_LAST,
-                          reliability=ReliabilityPolicy.RELIABLE)
 _DIAGNOSTICS_PERIOD_S = 1.0
 _PALM_FRAME = 'palm'
 
@@ -58,8 +54,10 @@ class ModelNode(Node):
 
     Nothing is published for a finger before its first valid pressure (its diagnostics
     say "waiting for pressure input" at WARN). Shape, curvature, rigidity and markers are
-    transient local with depth 1: a late subscriber gets the newest state from the
-    publisher's history, and every message answers an input. Bad inputs are rejected and
+    transient local, depth 1 for readers: a late subscriber gets the newest state from the
+    publisher's history, and every message answers an input. Their writers keep 0.5 s at
+    their rate, so a recorder that stalls that long loses none (`io.qos.writer_qos`; the
+    depth is set at the start value of ``max_rate_hz``). Bad inputs are rejected and
     a failed solve publishes nothing: each finger keeps its last good state (see
     :class:`~fpc_gripper.services.model_core.ModelCore`). Every input is checked before any
     solve or serialisation against bounds that are parameters: payload size (checked
@@ -138,7 +136,7 @@ class ModelNode(Node):
         self._outputs = ModelOutputs(self, self._core, self._frames, self._palm_frame,
                                      self._placements, self._lock, self._steady,
                                      self._now_ns, self._rigidity_period(),
-                                     param('publish_tf').value)
+                                     param('publish_tf').value, param('max_rate_hz').value)
         self._subscribe_inputs(names)
         self._rate_timer = self.create_timer(1.0 / param('max_rate_hz').value, self._on_timer,
                                              clock=self._steady)
@@ -209,12 +207,12 @@ class ModelNode(Node):
         if self.get_parameter('pressure_input').value == 'measured':
             self._pressure_topic, qos = 'pressure', qos_profile_sensor_data
         else:
-            self._pressure_topic, qos = 'pressure_command', _COMMAND_QOS
+            self._pressure_topic, qos = 'pressure_command', RELIABLE_QOS
         self._pressure_subs = tuple(
             self._subscribe(i, FluidPressure, self._pressure_topic, qos, self._on_pressure)
             for i in range(len(names)))
         self._force_subs = tuple(
-            self._subscribe(i, WrenchStamped, 'tip_force', _COMMAND_QOS, self._on_tip_force)
+            self._subscribe(i, WrenchStamped, 'tip_force', RELIABLE_QOS, self._on_tip_force)
             for i in range(len(names)))
 
     def _subscribe(self, index, msg_type, topic, qos, callback):

@@ -7,13 +7,11 @@ from diagnostic_msgs.msg import DiagnosticArray
 from diagnostic_msgs.msg import DiagnosticStatus
 from diagnostic_msgs.msg import KeyValue
 from rclpy.lifecycle import TransitionCallbackReturn
-from rclpy.qos import HistoryPolicy
 from rclpy.qos import qos_profile_sensor_data
-from rclpy.qos import QoSProfile
-from rclpy.qos import ReliabilityPolicy
 from rclpy.time import Time
 from sensor_msgs.msg import FluidPressure
 
+from fpc_gripper.io.qos import RELIABLE_QOS
 from fpc_gripper.nodes.guard import InputGuard
 from fpc_gripper.nodes.lifecycle import SelfActivatingNode
 from fpc_gripper.nodes.parameters import check_change
@@ -32,8 +30,6 @@ from fpc_gripper.services.input_limits import input_bound_table
 from fpc_gripper.services.logs import NodeLog
 from fpc_gripper.services.logs import Severity
 
-_COMMAND_QOS = QoSProfile(depth=10, history=HistoryPolicy.KEEP_LAST,
-                          reliability=ReliabilityPolicy.RELIABLE)
 _LEVELS = {Level.OK: DiagnosticStatus.OK, Level.WARN: DiagnosticStatus.WARN,
            Level.ERROR: DiagnosticStatus.ERROR}
 #: A line of the session or the core logs at the severity of its level (OK: info).
@@ -230,10 +226,10 @@ class RegulatorBridge(SelfActivatingNode):
                                             qos_profile_sensor_data)
             for name in self.finger_names)
         self._diag_pub = self.create_lifecycle_publisher(DiagnosticArray, '/diagnostics',
-                                                         _COMMAND_QOS)
+                                                         RELIABLE_QOS)
         self._command_subs = tuple(
             self._guard.subscribe(self, FluidPressure, f'{name}/pressure_command',
-                                  _COMMAND_QOS, functools.partial(self._on_command, i),
+                                  RELIABLE_QOS, functools.partial(self._on_command, i),
                                   functools.partial(self._on_refused, i),
                                   functools.partial(self._on_lost, i))
             for i, name in enumerate(self.finger_names))

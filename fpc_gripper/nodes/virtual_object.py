@@ -8,10 +8,7 @@ import sys
 from geometry_msgs.msg import WrenchStamped
 from nav_msgs.msg import Path
 from rclpy.node import Node
-from rclpy.qos import HistoryPolicy
 from rclpy.qos import qos_profile_sensor_data
-from rclpy.qos import QoSProfile
-from rclpy.qos import ReliabilityPolicy
 from sensor_msgs.msg import FluidPressure
 
 from fpc_gripper.control.virtual_object import VirtualObject
@@ -19,6 +16,9 @@ from fpc_gripper.control.virtual_object_parameters import METHODS
 from fpc_gripper.control.virtual_object_parameters import PARAMETERS
 from fpc_gripper.grasp.objects import make_object
 from fpc_gripper.io.config import load_gripper_config
+from fpc_gripper.io.qos import MAX_STREAM_HZ
+from fpc_gripper.io.qos import RELIABLE_QOS
+from fpc_gripper.io.qos import writer_qos
 from fpc_gripper.nodes.guard import InputGuard
 from fpc_gripper.nodes.parameters import declare_table
 from fpc_gripper.nodes.runner import run_node
@@ -29,9 +29,6 @@ __all__ = ['RESIDUAL_SAMPLES', 'VirtualObjectNode', 'main']
 #: Tip residuals kept (the newest; some 3 min of shapes in contact at 3 x 200 Hz), in arrays
 #: of fixed size (1.6 MB) allocated at construction.
 RESIDUAL_SAMPLES = 100_000
-
-_RELIABLE = QoSProfile(depth=10, history=HistoryPolicy.KEEP_LAST,
-                       reliability=ReliabilityPolicy.RELIABLE)
 
 
 class VirtualObjectNode(Node):
@@ -74,7 +71,9 @@ class VirtualObjectNode(Node):
                                      else param('stiffness_n_m').value)
         self.contacts = [None] * len(self._names)
         self.residuals = SampleRing(RESIDUAL_SAMPLES)
-        self._pubs = tuple(self.create_publisher(WrenchStamped, f'{n}/tip_force', _RELIABLE)
+        # One force per measured pressure, at the bridge's rate, which this node never sees.
+        self._pubs = tuple(self.create_publisher(WrenchStamped, f'{n}/tip_force',
+                                                 writer_qos(RELIABLE_QOS, MAX_STREAM_HZ))
                            for n in self._names)
         # Raw through the guard, as every node's inputs: size-checked, decoded, and a
         # payload that does not decode is logged, not dropped without a word.
@@ -85,7 +84,7 @@ class VirtualObjectNode(Node):
                                   functools.partial(self._on_pressure, i),
                                   functools.partial(self._on_refused, i))
             self.create_subscription(Path, f'{name}/shape', functools.partial(self._on_shape, i),
-                                     _RELIABLE, raw=True)
+                                     RELIABLE_QOS, raw=True)
         self.get_logger().info(
             f'{param("object").value} D = {param("object_diameter").value * 1e3:.1f} mm '
             f'({method}); the free fingers touch it below '
