@@ -19,8 +19,7 @@ ROOT = pathlib.Path(__file__).resolve().parents[2]
 INFRASTRUCTURE = re.compile(r'^/(rosout|parameter_events)$|/transition_event$')
 _ROW = re.compile(r'^\| `(?P<topic>[^`]+)` \| (?P<type>[^|]+) \| (?P<nodes>[^|]+) \| '
                   r'(?P<qos>[^|]+) \|$')
-_QOS = re.compile(r'^(reliable|best effort), (volatile|transient local), depth (\d+)'
-                  r'(?:, writer depth (\d+))?')
+_QOS = re.compile(r'^(reliable|best effort), (volatile|transient local), depth (\d+)')
 _RELIABILITY = {'reliable': ReliabilityPolicy.RELIABLE,
                 'best effort': ReliabilityPolicy.BEST_EFFORT}
 _DURABILITY = {'volatile': DurabilityPolicy.VOLATILE,
@@ -28,17 +27,17 @@ _DURABILITY = {'volatile': DurabilityPolicy.VOLATILE,
 
 
 def readme_table():
-    """Rows of the README's 'Topics and QoS' table: topic -> (type, nodes, QoS, writer depth)."""
+    """Rows of the README's 'Topics and QoS' table: topic -> (type, nodes, QoS)."""
     text = (ROOT / 'README.md').read_text()
     section = text.split('### Topics and QoS\n', 1)[1].strip().split('\n\n', 1)[0]
     rows = {}
     for line in section.splitlines()[2:]:
         match = _ROW.match(line)
         assert match, f'not a table row: {line!r}'
-        reliability, durability, depth, writer = _QOS.match(match['qos']).groups()
+        reliability, durability, depth = _QOS.match(match['qos']).groups()
         rows[match['topic']] = (match['type'].strip(), match['nodes'],
                                 (_RELIABILITY[reliability], _DURABILITY[durability],
-                                 int(depth)), int(writer or depth))
+                                 int(depth)))
     return rows
 
 
@@ -77,11 +76,11 @@ def test_every_topic_is_in_the_readme_table_with_its_qos(nodes):
                 else topic
             name = re.sub(r'^finger_\d+/', 'finger_<i>/', relative)
             assert name in table, f'{node.get_name()} {kind} {topic} is not in the README'
-            type_name, names, (reliability, durability, depth), writer = table[name]
+            type_name, names, (reliability, durability, depth) = table[name]
             where = f'{node.get_name()} {kind} {topic}'
             assert node.get_name() in names and msg_type == type_name, where
             assert (qos.reliability, qos.durability, qos.depth) == (
-                reliability, durability, writer if kind == 'pub' else depth), where
+                reliability, durability, depth), where
             seen.add(name)
     # Every row belongs to a node here.
     assert set(table) - seen == set()
