@@ -13,7 +13,6 @@
 # bench/results/executor_backlog.json and prints a table.
 
 import argparse
-import ctypes
 import json
 import os
 import pathlib
@@ -29,19 +28,6 @@ SLEEP_S = 0.08
 SAMPLE_S = 5.0
 
 
-class _MallInfo2(ctypes.Structure):
-    _fields_ = [(name, ctypes.c_size_t) for name in (
-        'arena', 'ordblks', 'smblks', 'hblks', 'hblkhd', 'usmblks', 'fsmblks', 'uordblks',
-        'fordblks', 'keepcost')]
-
-
-def _in_use_mib():
-    libc = ctypes.CDLL('libc.so.6')
-    libc.mallinfo2.restype = _MallInfo2
-    info = libc.mallinfo2()
-    return (info.uordblks + info.hblkhd) / 2**20
-
-
 def child(role, executor_kind, every, duration_s):
     """Publish, or read and report, for `duration_s` [s]; the reader prints one JSON line."""
     from fpc_gripper.nodes.middleware import apply_allocator_settings
@@ -55,6 +41,14 @@ def child(role, executor_kind, every, duration_s):
     from rclpy.serialization import serialize_message
 
     from fpc_gripper.io.qos import RELIABLE_QOS
+
+    sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
+    from soak_nodes import mallinfo2
+    read_mallinfo = mallinfo2()
+
+    def in_use_mib():
+        info = read_mallinfo()
+        return (info.uordblks + info.hblkhd) / 2**20
 
     rclpy.init(args=[])
     node = rclpy.create_node(f'backlog_{role}')
@@ -79,7 +73,7 @@ def child(role, executor_kind, every, duration_s):
     while time.monotonic() - t0 < duration_s:
         executor.spin_once(timeout_sec=0.05)
         if time.monotonic() >= next_sample:
-            samples.append((time.monotonic() - t0, _in_use_mib(), handled[0]))
+            samples.append((time.monotonic() - t0, in_use_mib(), handled[0]))
             next_sample += SAMPLE_S
     if role == 'sub':
         print(json.dumps(samples), flush=True)

@@ -99,7 +99,7 @@ class _MallInfo2(ctypes.Structure):
         'fordblks', 'keepcost')]
 
 
-def _mallinfo2():
+def mallinfo2():
     """Return glibc's mallinfo2 (2.33 and later), or None where there is none."""
     try:
         function = ctypes.CDLL(None).mallinfo2
@@ -124,7 +124,7 @@ class HeapLog:
     """
 
     def __init__(self, node, path, period_s):
-        self._mallinfo = _mallinfo2()
+        self._mallinfo = mallinfo2()
         self._malloc_info = _malloc_info()
         self._file = open(path, 'a', buffering=1)
         self._timer = node.create_timer(period_s, self.sample)
