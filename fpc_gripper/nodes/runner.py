@@ -124,7 +124,9 @@ def make_executor(nodes):
     rclpy's EventsExecutor (the Jazzy wheel's ``rclpy.experimental``) when it is there:
     it waits on rcl's events instead of rebuilding the wait set on every spin, which was
     64 % of model_node's samples at 3 x 200 Hz. It takes no guard conditions, so it is
-    woken by its own `wake`. Else (or with ``FPC_GRIPPER_EXECUTOR=single``) the
+    woken by its own `wake`. Its event queue has no bound: a node that cannot keep up
+    holds one queued event per message it is behind (bench/executor_backlog.py). Else (or
+    with ``FPC_GRIPPER_EXECUTOR=single``, whose backlog is the readers' depths) the
     SingleThreadedExecutor, woken by a guard condition.
     """
     context = nodes[0].context
