@@ -69,9 +69,9 @@ class VirtualObjectNode(Node):
                                      else param('stiffness_n_m').value)
         self.contacts = [None] * len(self._names)
         self.residuals = SampleRing(RESIDUAL_SAMPLES)
-        self._pubs = tuple(self.create_publisher(WrenchStamped, f'{n}/tip_force',
-                                                 RELIABLE_QOS)
-                           for n in self._names)
+        self._pubs = tuple(
+            self.create_publisher(WrenchStamped, f'{n}/tip_force', RELIABLE_QOS)
+            for n in self._names)
         # Raw through the guard, as every node's inputs: size-checked, decoded, and a
         # payload that does not decode is logged, not dropped without a word.
         self._guard = InputGuard()
