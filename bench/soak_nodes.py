@@ -100,7 +100,7 @@ class _MallInfo2(ctypes.Structure):
 
 
 def mallinfo2():
-    """Return glibc's mallinfo2 (2.33 and later), or None where there is none."""
+    """Return glibc's function of that name (glibc 2.33 and later), or None where there is none."""
     try:
         function = ctypes.CDLL(None).mallinfo2
     except (AttributeError, OSError):
