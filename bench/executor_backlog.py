@@ -92,13 +92,11 @@ def run(executor_kind, every, duration_s):
 
 
 def slope(samples, first_s):
-    """Least-squares slope of the bytes in use after `first_s` [MiB/s]."""
+    """Least-squares slope of the bytes in use after `first_s` [MiB/s] (soak's fit)."""
+    sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
+    from soak import slope_per_hour
     points = [(t, mib) for t, mib, _ in samples if t >= first_s]
-    n = len(points)
-    mean_t = sum(t for t, _ in points) / n
-    mean_m = sum(m for _, m in points) / n
-    return (sum((t - mean_t) * (m - mean_m) for t, m in points)
-            / sum((t - mean_t) ** 2 for t, _ in points))
+    return slope_per_hour(*zip(*points)) / 3600.0
 
 
 def main(argv=None):
