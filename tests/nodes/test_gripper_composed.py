@@ -105,10 +105,7 @@ def _gripper_process(tmp_path, *args):
 
 def _spin_for(executor, future, output):
     """Spin until `future` is done (a hang guard in wall time, no judgement); its result."""
-    deadline = time.monotonic() + STARTUP_S
-    while not future.done():
-        assert time.monotonic() < deadline, ''.join(output)
-        executor.spin_once(timeout_sec=0.1)
+    assert spin_until(executor, future.done, STARTUP_S, step=0.1), ''.join(output)
     return future.result()
 
 
