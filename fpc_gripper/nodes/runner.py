@@ -17,6 +17,7 @@ from rclpy.logging import get_logger
 from rclpy.signals import SignalHandlerOptions
 from rclpy.utilities import remove_ros_args
 
+from fpc_gripper.nodes.executor_watch import ExecutorWatch
 from fpc_gripper.nodes.heap_trim import HeapTrim
 from fpc_gripper.nodes.middleware import apply_middleware_settings
 from fpc_gripper.nodes.middleware import settings_wanted
@@ -191,6 +192,8 @@ def run_node(build, name, args=None, check=None):
     stop (see `StopRequest`); the running callback finishes, the node is destroyed (so
     the recorder closes its file and the bridge vents), and only then is the context
     shut down.
+    The first node carries the process's `ExecutorWatch` (``node.executor_watch``),
+    which warns while the executor's timers run late.
 
     Parameters
     ----------
@@ -216,7 +219,7 @@ def run_node(build, name, args=None, check=None):
     stop = StopRequest()
     for signum in _STOP_SIGNALS:
         signal.signal(signum, stop)
-    built = executor = waker = None
+    built = executor = waker = watch = None
     nodes = ()
     try:
         try:
@@ -241,7 +244,11 @@ def run_node(build, name, args=None, check=None):
         # long as the node: out of the collector's sight, a full collection no longer walks
         # it while messages wait (at 3 x 200 Hz its pauses made the p99 latency).
         gc.freeze()
+        # Before the executor: the EventsExecutor takes the node's timers when it is added.
+        watch = ExecutorWatch(nodes[0], nodes[0].get_logger())
         executor, wake = make_executor(nodes)
+        watch.single = isinstance(executor, SingleThreadedExecutor)
+        nodes[0].executor_watch = watch
         waker = _Waker(wake)
         while not stop.requested and rclpy.ok():
             executor.spin_once(timeout_sec=SPIN_TIMEOUT_S)
@@ -255,6 +262,8 @@ def run_node(build, name, args=None, check=None):
         stop.stopping = True
         if waker is not None:
             waker.close()
+        if watch is not None:
+            watch.close()
         if executor is not None:
             _flush_stops(nodes, executor)
             executor.shutdown()
