@@ -9,8 +9,10 @@
 # Both processes make the nodes' middleware and allocator settings. The keep-last reader
 # history holds at most 10 messages per topic whichever the executor, so growth beyond
 # that is the executor's own: the EventsExecutor queues an event for every message that
-# arrives and takes one message per event, with no bound on the queue. Writes
-# bench/results/executor_backlog.json and prints a table.
+# arrives and takes one message per event, with no bound on the queue. The reader also runs
+# the nodes' executor watch (fpc_gripper/nodes/executor_watch.py): how often its 0.5 s
+# heartbeat timer ran, and how late. Writes bench/results/executor_backlog.json and prints
+# a table.
 
 import argparse
 import json
@@ -41,6 +43,7 @@ def child(role, executor_kind, every, duration_s):
     from rclpy.serialization import serialize_message
 
     from fpc_gripper.io.qos import RELIABLE_QOS
+    from fpc_gripper.nodes.executor_watch import ExecutorWatch
 
     sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
     from soak_nodes import mallinfo2
@@ -66,6 +69,10 @@ def child(role, executor_kind, every, duration_s):
         for i in range(TOPICS):
             node.create_subscription(WrenchStamped, f'backlog_{i}', on_message, RELIABLE_QOS,
                                      raw=True)
+    lines = []
+    log = type('Log', (), {'warning': staticmethod(lines.append),
+                           'info': staticmethod(lines.append)})
+    watch = ExecutorWatch(node, log) if role == 'sub' else None
     executor = EventsExecutor() if executor_kind == 'events' else SingleThreadedExecutor()
     executor.add_node(node)
     samples = []
@@ -76,11 +83,15 @@ def child(role, executor_kind, every, duration_s):
             samples.append((time.monotonic() - t0, in_use_mib(), handled[0]))
             next_sample += SAMPLE_S
     if role == 'sub':
-        print(json.dumps(samples), flush=True)
+        watch.close()
+        lag = watch.lag
+        print(json.dumps({'samples': samples, 'beats': watch.beats, 'episodes': lag.episodes,
+                          'worst_late_s': max(lag.worst_s, lag.late(time.monotonic())),
+                          'watch_lines': lines}), flush=True)
 
 
 def run(executor_kind, every, duration_s):
-    """Start a reader and a publisher; return the reader's samples (t [s], MiB, handled)."""
+    """Start a reader and a publisher; return the reader's report (`child`'s JSON line)."""
     command = [sys.executable, __file__, '--child']
     reader = subprocess.Popen([*command, 'sub', executor_kind, str(every), str(duration_s)],
                               cwd=ROOT, stdout=subprocess.PIPE, text=True)
@@ -112,26 +123,36 @@ def main(argv=None):
     if os.environ.get('FPC_NETNS') != '1':
         parser.error('run inside the private namespace: scripts/isolated .venv/bin/python '
                      'bench/executor_backlog.py')
+    # Here, not at the top: a child makes its allocator settings before rclpy is imported.
+    from fpc_gripper.nodes.executor_watch import BEAT_PERIOD_S
     rows = []
     for kind in ('events', 'single'):
         for every in (0, args.every):
-            samples = run(kind, every, args.duration)
+            report = run(kind, every, args.duration)
+            samples = report['samples']
             handled_per_s = samples[-1][2] / samples[-1][0]
             rows.append({'executor': kind, 'overloaded': bool(every),
                          'handled_per_s': handled_per_s,
                          'arriving_per_s': RATE_HZ * TOPICS,
                          'in_use_slope_mib_per_s': slope(samples, 10.0),
+                         'heartbeats': report['beats'],
+                         'heartbeats_due': int(args.duration / BEAT_PERIOD_S),
+                         'behind_episodes': report['episodes'],
+                         'worst_late_s': report['worst_late_s'],
+                         'watch_lines': report['watch_lines'],
                          'samples': samples})
     RESULTS.parent.mkdir(parents=True, exist_ok=True)
     RESULTS.write_text(json.dumps({'rate_hz': RATE_HZ, 'topics': TOPICS, 'sleep_s': SLEEP_S,
                                    'every': args.every, 'duration_s': args.duration,
                                    'rows': rows}, indent=2) + '\n')
     print(f'{"executor":<10}{"reader":<14}{"handled/s":>11}{"arriving/s":>12}'
-          f'{"in use [MiB/s]":>16}')
+          f'{"in use [MiB/s]":>16}{"heartbeats":>12}{"latest [s]":>12}')
     for row in rows:
         print(f'{row["executor"]:<10}{"overloaded" if row["overloaded"] else "keeps up":<14}'
               f'{row["handled_per_s"]:>11.0f}{row["arriving_per_s"]:>12.0f}'
-              f'{row["in_use_slope_mib_per_s"]:>16.3f}')
+              f'{row["in_use_slope_mib_per_s"]:>16.3f}'
+              f'{row["heartbeats"]:>6} of {row["heartbeats_due"]:<3}'
+              f'{row["worst_late_s"]:>12.1f}')
     print(f'wrote {RESULTS}')
     return 0
 
