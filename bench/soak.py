@@ -931,6 +931,23 @@ def recorder_counts(log):
         if matches else None
 
 
+# The executor watch's lines (fpc_gripper/nodes/executor_watch.py): an episode's start, its end.
+_BEHIND_LINE = re.compile(r'executor (?P<late>[0-9.]+) s behind: ')
+_CAUGHT_UP_LINE = re.compile(r'executor caught up: its timers ran (?P<late>[0-9.]+) s late')
+
+
+def executor_episodes(log):
+    """
+    Return the executor watch's episodes in a node's log, and the worst lateness [s].
+
+    The worst is of the episodes that ended (their heartbeat ran again), else of the
+    warnings: an episode still under way at the stop has only its start line.
+    """
+    starts = [float(m['late']) for m in _BEHIND_LINE.finditer(log)]
+    ends = [float(m['late']) for m in _CAUGHT_UP_LINE.finditer(log)]
+    return {'episodes': len(starts), 'worst_late_s': max(starts + ends, default=0.0)}
+
+
 def read_recording(path, probe, junk=frozenset()):
     """
     Read the closed MCAP file: counts, a decoded sample, and the probe comparison.
@@ -1361,6 +1378,8 @@ class Soak:
             'goals': goals,
             'goals_reached': f'{sum(g["reached"] for g in goals)} / {len(goals)}',
             'recording': recording, 'first_last_minute': rows, 'samples': self.samples,
+            'executor_watch': {name: executor_episodes(p.log_text())
+                               for name, p in self.procs.items()},
         }
         out = pathlib.Path(args.out)
         out.parent.mkdir(parents=True, exist_ok=True)
@@ -1386,6 +1405,9 @@ class Soak:
                   f'held free {ls["free_mib"]:+.1f} ({ts["free_mib"]:+.1f}) MiB/h, pymalloc '
                   f'blocks {ls["pymalloc_blocks"]:+.0f} ({ts["pymalloc_blocks"]:+.0f}) /h'
                   f'{_arena_text(log["samples"][-1], ls, ts)}{_trim_text(log["samples"][-1])}')
+        print('executor watch (episodes, worst lateness): ' + ', '.join(
+            f'{n} {w["episodes"]} ({w["worst_late_s"]:.1f} s)'
+            for n, w in results['executor_watch'].items()))
         for crash in self.crashes:
             print(f'CRASH: {crash["node"]} exited {crash["exit_code"]} at {crash["t"]:.1f} s; '
                   f'log tail:\n{crash["log_tail"][-1500:]}')

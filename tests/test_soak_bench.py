@@ -19,6 +19,7 @@ from sensor_msgs.msg import FluidPressure
 BENCH = pathlib.Path(__file__).resolve().parents[1] / 'bench'
 sys.path.insert(0, str(BENCH))
 from soak import cdr_fluid_pressure, cdr_header, LatencyTracker, NS  # noqa: E402, I100
+from soak import executor_episodes  # noqa: E402
 from soak import FAULT_KINDS  # noqa: E402
 from soak import FaultInjector, is_junk, read_recording, recorder_counts  # noqa: E402
 from soak import heap_slopes, read_heap_log, slope_per_hour, SpilledArray  # noqa: E402
@@ -26,6 +27,7 @@ from soak_nodes import arena_summary, HeapLog  # noqa: E402
 
 from fpc_gripper.io.mcap_writer import Rosbag2McapWriter  # noqa: E402
 from fpc_gripper.io.recording_counts import RecordingCounts  # noqa: E402
+from fpc_gripper.nodes.executor_watch import Lag  # noqa: E402
 
 
 #: The fault kinds that put messages on the gripper's topics (not the regulator's).
@@ -263,6 +265,19 @@ def test_the_recorders_stop_line_is_read_from_its_log():
                                     'queue_full': 2, 'failed_writes': 1, 'lost': 5,
                                     'invalid_stamps': 1}
     assert recorder_counts('[INFO] recording 1 topics\n') is None
+
+
+def test_the_executor_watchs_episodes_are_read_from_a_log():
+    # The lines the watch writes (Lag's), as a node logs them: two episodes, the first
+    # ended 6.3 s late, the second still under way at the stop (4.7 s at its warning).
+    lag = Lag(0.5, 2.0, now=0.0)
+    lines = [lag.check(2.6), lag.beat(6.8), lag.check(12.0)]
+    assert None not in lines
+    log = '\n'.join(f'[WARN] [1.0] [model_node]: {line}; advice' for line in lines)
+    assert executor_episodes(log) == {'episodes': 2, 'worst_late_s': pytest.approx(6.3)}
+    assert executor_episodes(f'[WARN] [1.0] [n]: {lines[0]}; x') == {
+        'episodes': 1, 'worst_late_s': pytest.approx(2.1)}
+    assert executor_episodes('[INFO] ready\n') == {'episodes': 0, 'worst_late_s': 0.0}
 
 
 class _TimerNode:
