@@ -30,6 +30,7 @@ import rclpy
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.serialization import serialize_message
 from sensor_msgs.msg import FluidPressure
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
@@ -201,6 +202,53 @@ def solver_us(tolerance, count=600):
             last[i] = solver.solve(command_gauge(k, i, 'distinct'), initial=last[i])
             times.append(time.perf_counter() - t0)
     return statistics.median(times) * 1e6
+
+
+def in_process_us(tolerance, pace_hz=None, ticks=600, repeats=3):
+    """
+    model_node's CPU per command in this process, without the middleware [us].
+
+    A ModelNode of this process (its own context, never spun) gets the per-command runs'
+    commands (three fingers, distinct sweeps, serialized) through its guarded pressure
+    callbacks, called directly; its outputs have no subscriber. Back to back (`pace_hz`
+    None), or one finger's command every 1/(3 `pace_hz`) s with the thread asleep in
+    between, as a node waits between messages. Median over `repeats` of the thread's CPU
+    time per command.
+    """
+    from rclpy.parameter import Parameter
+    from fpc_gripper.nodes.model_node import ModelNode
+    context = Context()
+    rclpy.init(context=context)
+    node = ModelNode('in_process', namespace='/bench_in_process', context=context,
+                     parameter_overrides=[Parameter('max_rate_hz', value=10000.0),
+                                          Parameter('tolerance', value=float(tolerance))])
+    try:
+        by_topic = {sub.topic_name: sub for sub in node.subscriptions}
+        callbacks = [by_topic[f'/bench_in_process/{f}/pressure_command'].callback
+                     for f in FINGERS]
+        msg = FluidPressure()
+        gap = None if pace_hz is None else 1.0 / (len(FINGERS) * pace_hz)
+
+        def run(tick0):
+            spent = 0
+            for k in range(tick0, tick0 + ticks):
+                for i, callback in enumerate(callbacks):
+                    msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(
+                        time.time_ns(), 1_000_000_000)
+                    msg.fluid_pressure = ATM + command_gauge(k, i, 'distinct')
+                    payload = serialize_message(msg)
+                    start = time.thread_time_ns()
+                    callback(payload)
+                    spent += time.thread_time_ns() - start
+                    if gap:
+                        time.sleep(gap)
+            return spent * 1e-3 / (ticks * len(callbacks))
+
+        run(0)
+        return statistics.median(run(ticks * (r + 1)) for r in range(repeats))
+    finally:
+        node.destroy_node()
+        context.try_shutdown()
 
 
 def per_command_run(driver, model, rate_hz, duration_s, repeats, solve_us):
@@ -401,9 +449,14 @@ def per_command_main(args):
     Run issue 22's per-command measurement and write its JSON.
 
     Also measured, in the same run: the floor, bench/floor_node.py's CPU per command
-    (a raw take and one raw publish, no Python work), which no rclpy node goes below.
+    (a raw take and one raw publish, no Python work), which no rclpy node goes below; and
+    the node's own work per command in this process, without the middleware, back to
+    back and paced at each rate (`in_process_us`).
     """
     solve = solver_us(args.tolerance)
+    in_process = {'back_to_back': in_process_us(args.tolerance)}
+    for rate in RATES:
+        in_process[str(int(rate))] = in_process_us(args.tolerance, rate, ticks=300)
     context = Context()
     rclpy.init(context=context)
     executor = SingleThreadedExecutor(context=context)
@@ -412,7 +465,8 @@ def per_command_main(args):
     results = {'machine': machine(), 'tolerance_m': args.tolerance, 'solver_us': solve,
                'executor': os.environ.get('FPC_GRIPPER_EXECUTOR', 'default'),
                'node_parameters': args.node_param,
-               'load_average_before': os.getloadavg(), 'rates': {}}
+               'load_average_before': os.getloadavg(), 'in_process_us': in_process,
+               'rates': {}}
     try:
         # The floor first: the same driver, commands and QoS against a node that only takes
         # each command raw and publishes fixed shape bytes.
@@ -442,6 +496,10 @@ def per_command_main(args):
     args.output.parent.mkdir(parents=True, exist_ok=True)
     args.output.write_text(json.dumps(results, indent=2) + '\n')
     print(f'in-process solve per command: {solve:.0f} us')
+    print('in-process node work per command, no middleware: '
+          f'{in_process["back_to_back"]:.0f} us back to back, ' + ', '.join(
+              f'{in_process[str(int(rate))]:.0f} us paced at 3 x {rate:.0f} Hz'
+              for rate in RATES))
     print(f'{"3 fingers x":<14}{"node CPU":>9}{"answered":>9}{"p50 ms":>8}{"p99 ms":>8}'
           f'{"CPU/cmd us":>11}{"outside solver":>15}{"floor":>7}{"above floor":>12}')
     for rate, row in results['rates'].items():
