@@ -293,6 +293,11 @@ class Rig:
         return max(m.fluid_pressure for msgs in self.commands.values() for m in msgs) - ATM
 
     def close(self):
+        # As run_node stops its nodes: a running goal is aborted, and its execution runs on
+        # the executor, before any node goes (else the execute task is left unrun).
+        waiting = [node.stopping() for node in self.nodes if hasattr(node, 'stopping')]
+        waiting = [done for done in waiting if done is not None]
+        assert spin_until(self.executor, lambda: all(done() for done in waiting), HANG_S)
         for node in reversed(self.nodes):
             self.executor.remove_node(node)
             node.destroy_node()
