@@ -63,6 +63,14 @@ def command_gauge(tick, finger, mode):
     return gauge + (7e3 * finger if mode == 'distinct' else 0.0)
 
 
+def fill_command(msg, tick, finger, mode):
+    """Stamp a FluidPressure now and set its absolute pressure; return the stamp [ns]."""
+    stamp = time.time_ns()
+    msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp, 1_000_000_000)
+    msg.fluid_pressure = ATM + command_gauge(tick, finger, mode)
+    return stamp
+
+
 class ModelProcess:
     """The model node in a child process, in its own namespace."""
 
@@ -149,9 +157,7 @@ class Driver:
             if delay > 0:
                 time.sleep(delay)
             for i, (pub, msg) in enumerate(zip(self.pubs, msgs)):
-                stamp = time.time_ns()
-                msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp, 1_000_000_000)
-                msg.fluid_pressure = ATM + command_gauge(tick0 + k, i, mode)
+                stamp = fill_command(msg, tick0 + k, i, mode)
                 pub.publish(msg)
                 sent[i].append(stamp)
         elapsed = time.perf_counter() - start
@@ -204,16 +210,21 @@ def solver_us(tolerance, count=600):
     return statistics.median(times) * 1e6
 
 
-def in_process_us(tolerance, pace_hz=None, ticks=600, repeats=3):
+def in_process_us(tolerance, paces_hz, ticks=600, paced_ticks=300, repeats=3):
     """
     model_node's CPU per command in this process, without the middleware [us].
 
     A ModelNode of this process (its own context, never spun) gets the per-command runs'
     commands (three fingers, distinct sweeps, serialized) through its guarded pressure
-    callbacks, called directly; its outputs have no subscriber. Back to back (`pace_hz`
-    None), or one finger's command every 1/(3 `pace_hz`) s with the thread asleep in
-    between, as a node waits between messages. Median over `repeats` of the thread's CPU
-    time per command.
+    callbacks, called directly; its outputs have no subscriber. After one warm-up run:
+    back to back, then at each of `paces_hz` one finger's command every 1/(3 pace) s with
+    the thread asleep in between, as a node waits between messages. Each is the median over
+    `repeats` of the thread's CPU time per command.
+
+    Returns
+    -------
+    dict
+        ``'back_to_back'`` and ``str(int(pace))`` for each pace, to [us].
     """
     from rclpy.parameter import Parameter
     from fpc_gripper.nodes.model_node import ModelNode
@@ -227,25 +238,30 @@ def in_process_us(tolerance, pace_hz=None, ticks=600, repeats=3):
         callbacks = [by_topic[f'/bench_in_process/{f}/pressure_command'].callback
                      for f in FINGERS]
         msg = FluidPressure()
-        gap = None if pace_hz is None else 1.0 / (len(FINGERS) * pace_hz)
+        tick = 0
 
-        def run(tick0):
+        def run(count, gap):
+            nonlocal tick
             spent = 0
-            for k in range(tick0, tick0 + ticks):
+            for k in range(tick, tick + count):
                 for i, callback in enumerate(callbacks):
-                    msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(
-                        time.time_ns(), 1_000_000_000)
-                    msg.fluid_pressure = ATM + command_gauge(k, i, 'distinct')
+                    fill_command(msg, k, i, 'distinct')
                     payload = serialize_message(msg)
                     start = time.thread_time_ns()
                     callback(payload)
                     spent += time.thread_time_ns() - start
                     if gap:
                         time.sleep(gap)
-            return spent * 1e-3 / (ticks * len(callbacks))
+            tick += count
+            return spent * 1e-3 / (count * len(callbacks))
 
-        run(0)
-        return statistics.median(run(ticks * (r + 1)) for r in range(repeats))
+        run(ticks, None)
+        out = {'back_to_back': statistics.median(run(ticks, None) for _ in range(repeats))}
+        for pace in paces_hz:
+            gap = 1.0 / (len(FINGERS) * pace)
+            out[str(int(pace))] = statistics.median(run(paced_ticks, gap)
+                                                    for _ in range(repeats))
+        return out
     finally:
         node.destroy_node()
         context.try_shutdown()
@@ -454,9 +470,7 @@ def per_command_main(args):
     back and paced at each rate (`in_process_us`).
     """
     solve = solver_us(args.tolerance)
-    in_process = {'back_to_back': in_process_us(args.tolerance)}
-    for rate in RATES:
-        in_process[str(int(rate))] = in_process_us(args.tolerance, rate, ticks=300)
+    in_process = in_process_us(args.tolerance, RATES)
     context = Context()
     rclpy.init(context=context)
     executor = SingleThreadedExecutor(context=context)
