@@ -21,6 +21,7 @@ import pathlib
 import subprocess
 import sys
 import time
+import types
 
 RESULTS = pathlib.Path(__file__).resolve().parent / 'results' / 'executor_backlog.json'
 ROOT = pathlib.Path(__file__).resolve().parents[1]
@@ -70,8 +71,7 @@ def child(role, executor_kind, every, duration_s):
             node.create_subscription(WrenchStamped, f'backlog_{i}', on_message, RELIABLE_QOS,
                                      raw=True)
     lines = []
-    log = type('Log', (), {'warning': staticmethod(lines.append),
-                           'info': staticmethod(lines.append)})
+    log = types.SimpleNamespace(warning=lines.append, info=lines.append)
     watch = ExecutorWatch(node, log) if role == 'sub' else None
     executor = EventsExecutor() if executor_kind == 'events' else SingleThreadedExecutor()
     executor.add_node(node)
