@@ -15,12 +15,14 @@ from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import FluidPressure
 
 from fpc_gripper.io.messages import serialized_shape
-from fpc_gripper.io.qos import RELIABLE_QOS, STATE_QOS
+from fpc_gripper.io.qos import RELIABLE_QOS, STATE_QOS, writer_qos
 from fpc_gripper.model import ActuatorDesign
 from fpc_gripper.model.pipeline import finger_model
 from fpc_gripper.nodes.middleware import apply_middleware_settings
 
 FINGERS = 3
+#: model_node's max_rate_hz in the per-command runs, which sizes its shape writers' history.
+RATE_HZ = 1000.0
 
 
 def main(namespace):
@@ -29,7 +31,8 @@ def main(namespace):
     node = Node('floor_node', namespace=namespace)
     shape = bytearray(serialized_shape(finger_model(ActuatorDesign()).solve(1e5),
                                        'finger_0', 0))
-    pubs = [node.create_publisher(Path, f'finger_{i}/shape', STATE_QOS) for i in range(FINGERS)]
+    qos = writer_qos(STATE_QOS, RATE_HZ)
+    pubs = [node.create_publisher(Path, f'finger_{i}/shape', qos) for i in range(FINGERS)]
 
     def answer(i):
         def callback(payload):

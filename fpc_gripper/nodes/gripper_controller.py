@@ -60,6 +60,7 @@ from fpc_gripper.io.config import load_gripper_config
 from fpc_gripper.io.contact_markers import contact_marker
 from fpc_gripper.io.qos import RELIABLE_QOS
 from fpc_gripper.io.qos import STATE_QOS
+from fpc_gripper.io.qos import writer_qos
 from fpc_gripper.nodes.gripper_action import GripperCommandServer
 from fpc_gripper.nodes.guard import InputGuard
 from fpc_gripper.nodes.parameters import check_change
@@ -116,12 +117,13 @@ class GripperController(Node):
         self._last_output = None
         self._max_command = -math.inf
         self._schedule = StatusSchedule()
+        # Once a control period; the history for a recorder that stalls is sized at the start rate.
+        stream = writer_qos(RELIABLE_QOS, self._rate())
         self._command_pubs = tuple(
-            self.create_publisher(FluidPressure, f'{name}/pressure_command', RELIABLE_QOS)
+            self.create_publisher(FluidPressure, f'{name}/pressure_command', stream)
             for name in self._names)
-        self._aperture_pub = self.create_publisher(Float64, 'aperture', RELIABLE_QOS)
-        self._state_pub = self.create_publisher(DiagnosticStatus, 'controller_state',
-                                                RELIABLE_QOS)
+        self._aperture_pub = self.create_publisher(Float64, 'aperture', stream)
+        self._state_pub = self.create_publisher(DiagnosticStatus, 'controller_state', stream)
         self._diagnostics_pub = self.create_publisher(DiagnosticArray, '/diagnostics',
                                                       RELIABLE_QOS)
         self._contacts_pub = self.create_publisher(MarkerArray, 'contacts', STATE_QOS)

@@ -54,8 +54,11 @@ class ModelNode(Node):
 
     Nothing is published for a finger before its first valid pressure (its diagnostics
     say "waiting for pressure input" at WARN). Shape, curvature, rigidity and markers are
-    transient local with depth 1: a late subscriber gets the newest state from the
-    publisher's history, and every message answers an input. Bad inputs are rejected and
+    transient local, depth 1 for readers: a late subscriber gets the newest state from the
+    publisher's history, and every message answers an input. With
+    ``FPC_GRIPPER_WRITER_HISTORY_S`` set, their writers keep that many seconds at their
+    rate, so a recorder that stalls that long loses none (`io.qos.writer_qos`; the depth is
+    set at the start value of ``max_rate_hz``). Bad inputs are rejected and
     a failed solve publishes nothing: each finger keeps its last good state (see
     :class:`~fpc_gripper.services.model_core.ModelCore`). Every input is checked before any
     solve or serialisation against bounds that are parameters: payload size (checked
@@ -134,7 +137,7 @@ class ModelNode(Node):
         self._outputs = ModelOutputs(self, self._core, self._frames, self._palm_frame,
                                      self._placements, self._lock, self._steady,
                                      self._now_ns, self._rigidity_period(),
-                                     param('publish_tf').value)
+                                     param('publish_tf').value, param('max_rate_hz').value)
         self._subscribe_inputs(names)
         self._rate_timer = self.create_timer(1.0 / param('max_rate_hz').value, self._on_timer,
                                              clock=self._steady)

@@ -23,6 +23,7 @@ from fpc_gripper.io.qos import RELIABLE_QOS
 from fpc_gripper.io.qos import STATE_QOS
 from fpc_gripper.io.qos import TF_QOS
 from fpc_gripper.io.qos import TF_STATIC_QOS
+from fpc_gripper.io.qos import writer_qos
 from fpc_gripper.io.tf import palm_transform
 from fpc_gripper.io.tf import serialized_tip_tf
 from fpc_gripper.services.model_core import Level
@@ -129,11 +130,14 @@ class ModelOutputs:
         Shortest period of the rigidity output [s]; inf for none.
     publish_tf : bool
         Send the mounts on /tf_static and the tips on /tf (where tf2_msgs imports).
+    rate_hz : float
+        Most solves per finger per second [Hz]: it sizes the per-solve writers' history
+        (`~fpc_gripper.io.qos.writer_qos`).
 
     """
 
     def __init__(self, node, core, frames, palm_frame, placements, lock, steady, now_ns,
-                 rigidity_period_s, publish_tf):
+                 rigidity_period_s, publish_tf, rate_hz):
         self._node, self._core, self._lock, self._now_ns = node, core, lock, now_ns
         self._frames, self._palm_frame, self._placements = frames, palm_frame, placements
         self._markers = SlowOutput(node, _UNWATCHED_MARKER_PERIOD_S, self._publish_markers,
@@ -143,22 +147,26 @@ class ModelOutputs:
         self._last_kinds = None
         self._serialize_shapes = None
         names = core.names
+        state = writer_qos(STATE_QOS, rate_hz)
         self.shape_publishers = tuple(
-            node.create_publisher(Path, f'{name}/shape', STATE_QOS) for name in names)
+            node.create_publisher(Path, f'{name}/shape', state) for name in names)
         self._curvature_pubs = tuple(
-            node.create_publisher(Float64, f'{name}/curvature', STATE_QOS) for name in names)
+            node.create_publisher(Float64, f'{name}/curvature', state) for name in names)
+        rigidity = writer_qos(STATE_QOS, 1.0 / rigidity_period_s) if math.isfinite(
+            rigidity_period_s) else STATE_QOS
         self._rigidity_pubs = tuple(
-            node.create_publisher(Vector3Stamped, f'{name}/rigidity', STATE_QOS)
+            node.create_publisher(Vector3Stamped, f'{name}/rigidity', rigidity)
             for name in names)
-        self._markers_pub = node.create_publisher(MarkerArray, 'markers', STATE_QOS)
-        self._gripper_shape_pub = node.create_publisher(MarkerArray, 'gripper_shape',
-                                                        STATE_QOS)
+        markers = writer_qos(STATE_QOS, 1.0 / _MARKER_PERIOD_S)
+        self._markers_pub = node.create_publisher(MarkerArray, 'markers', markers)
+        self._gripper_shape_pub = node.create_publisher(MarkerArray, 'gripper_shape', markers)
         self.diagnostics_publisher = node.create_publisher(
             DiagnosticArray, '/diagnostics', RELIABLE_QOS)
-        self._tf_pub, self.tf_state = self._create_tf() if publish_tf else (
+        self._tf_pub, self.tf_state = self._create_tf(
+            writer_qos(TF_QOS, len(names) * rate_hz)) if publish_tf else (
             None, 'publish_tf false: no tf')
 
-    def _create_tf(self):
+    def _create_tf(self, qos):
         """
         Send palm -> finger_<i> on /tf_static; return the /tf publisher and what was done.
 
@@ -184,7 +192,7 @@ class ModelOutputs:
             self._static_tf_pub = StaticTransformBroadcaster(self._node)
             self._static_tf_pub.sendTransform(mounts)
             how = 'tf2_ros'
-        return (self._node.create_publisher(TFMessage, '/tf', TF_QOS),
+        return (self._node.create_publisher(TFMessage, '/tf', qos),
                 f'tf through {how}: mounts on /tf_static, finger -> tip on /tf')
 
     def set_rigidity_period(self, period_s):

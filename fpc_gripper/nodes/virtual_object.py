@@ -16,7 +16,10 @@ from fpc_gripper.control.virtual_object_parameters import METHODS
 from fpc_gripper.control.virtual_object_parameters import PARAMETERS
 from fpc_gripper.grasp.objects import make_object
 from fpc_gripper.io.config import load_gripper_config
+from fpc_gripper.io.qos import LATEST_QOS
+from fpc_gripper.io.qos import MAX_STREAM_HZ
 from fpc_gripper.io.qos import RELIABLE_QOS
+from fpc_gripper.io.qos import writer_qos
 from fpc_gripper.nodes.guard import InputGuard
 from fpc_gripper.nodes.parameters import declare_table
 from fpc_gripper.nodes.runner import run_node
@@ -69,9 +72,10 @@ class VirtualObjectNode(Node):
                                      else param('stiffness_n_m').value)
         self.contacts = [None] * len(self._names)
         self.residuals = SampleRing(RESIDUAL_SAMPLES)
-        self._pubs = tuple(
-            self.create_publisher(WrenchStamped, f'{n}/tip_force', RELIABLE_QOS)
-            for n in self._names)
+        # One force per measured pressure, at the bridge's rate, which this node never sees.
+        self._pubs = tuple(self.create_publisher(WrenchStamped, f'{n}/tip_force',
+                                                 writer_qos(RELIABLE_QOS, MAX_STREAM_HZ))
+                           for n in self._names)
         # Raw through the guard, as every node's inputs: size-checked, decoded, and a
         # payload that does not decode is logged, not dropped without a word.
         self._guard = InputGuard()
@@ -81,7 +85,7 @@ class VirtualObjectNode(Node):
                                   functools.partial(self._on_pressure, i),
                                   functools.partial(self._on_refused, i))
             self.create_subscription(Path, f'{name}/shape', functools.partial(self._on_shape, i),
-                                     RELIABLE_QOS, raw=True)
+                                     LATEST_QOS, raw=True)
         self.get_logger().info(
             f'{param("object").value} D = {param("object_diameter").value * 1e3:.1f} mm '
             f'({method}); the free fingers touch it below '

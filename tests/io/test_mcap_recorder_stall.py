@@ -21,7 +21,8 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from recorder_load import _Arc, start_hog, stop_hog
 
 
-from fpc_gripper.io.messages import serialized_shape, STATE_QOS
+from fpc_gripper.io.messages import serialized_shape
+from fpc_gripper.io.qos import STATE_QOS, writer_qos
 
 pytestmark = pytest.mark.ros
 
@@ -233,3 +234,55 @@ def test_messages_lost_before_a_stopped_recorder_are_counted_and_named(tmp_path)
     assert latest[TOPIC] == (f'received {count - lost}, dropped 0 (queue full), lost {lost} '
                              'before the recorder')
     assert f'{lost} messages lost before the recorder' in log, log
+
+
+def test_a_recorder_stopped_for_less_than_the_history_loses_no_shape_of_a_deep_writer(
+        tmp_path):
+    """
+    Issue 22, item 4: with 0.5 s of writer history, a stop of 0.25 s loses nothing.
+
+    The same stop as above, on the writer QoS model_node gives its shapes at its default
+    200 Hz with 0.5 s of history (`writer_qos`: depth 100). The whole recorder process is
+    stopped while 50 shapes (0.25 s) are published: the writer still holds them when it
+    continues, and resends them. With keep-last 1 the test above loses most of such a stop.
+    """
+    count, stopped, rate = 300, 50, 200.0
+    output = tmp_path / 'stopped.mcap'
+    recorder = start_recorder([sys.executable, '-m', 'fpc_gripper.nodes.mcap_recorder'],
+                              output, 0.0)
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    probe = Node('kept_probe', context=context)
+    qos = writer_qos(STATE_QOS, rate, history_s=0.5)
+    assert qos.depth == 100
+    publisher = probe.create_publisher(Path, TOPIC, qos)
+    arcs = [_Arc(5.0 + 0.01 * i) for i in range(50)]
+
+    def publish(first, last):
+        t0 = time.monotonic()
+        for i in range(first, last):
+            publisher.publish(serialized_shape(arcs[i % 50], 'finger_0', BASE + i))
+            time.sleep(max(0.0, t0 + (i + 1 - first) / rate - time.monotonic()))
+
+    try:
+        wait_for(lambda: publisher.get_subscription_count() == 1, recorder,
+                 'the recorder never subscribed')
+        publish(0, 1)
+        assert publisher.wait_for_all_acked(Duration(seconds=30.0))
+        recorder.send_signal(signal.SIGSTOP)
+        try:
+            publish(1, stopped + 1)
+        finally:
+            recorder.send_signal(signal.SIGCONT)
+        publish(stopped + 1, count)
+        assert publisher.wait_for_all_acked(Duration(seconds=30.0))
+        recorder.send_signal(signal.SIGINT)
+        code = recorder.wait(timeout=30.0)
+    finally:
+        close_probe(recorder, probe, context)
+    log = recorder.stdout.read().decode()
+    assert code == 0, log
+    got = probe_numbers(output)
+    assert got == list(range(count)), sorted(set(range(count)) - set(got))[:20]
+    received, written, dropped, full, failed, lost = stop_line(log)
+    assert (received, written, dropped, lost) == (count, count, 0, 0), log

@@ -8,11 +8,14 @@ import rclpy
 from rclpy.context import Context
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy
+from rclpy.qos import HistoryPolicy
 from rclpy.qos import ReliabilityPolicy
 
+from fpc_gripper.io.qos import WRITER_HISTORY_ENV
 from fpc_gripper.nodes.gripper_controller import GripperController
 from fpc_gripper.nodes.model_node import ModelNode
 from fpc_gripper.nodes.regulator_bridge import RegulatorBridge
+from fpc_gripper.nodes.virtual_object import VirtualObjectNode
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 # rclpy's own topics, not the package's.
@@ -43,6 +46,13 @@ def readme_table():
 
 @pytest.fixture(scope='module')
 def nodes():
+    # The table states the default: writers without a history of their own.
+    with pytest.MonkeyPatch.context() as patch:
+        patch.delenv(WRITER_HISTORY_ENV, raising=False)
+        yield from _nodes()
+
+
+def _nodes():
     context = Context()
     rclpy.init(context=context)
     built = [ModelNode(context=context, namespace='/cmd'),
@@ -84,3 +94,35 @@ def test_every_topic_is_in_the_readme_table_with_its_qos(nodes):
             seen.add(name)
     # Every row belongs to a node here.
     assert set(table) - seen == set()
+
+
+@pytest.mark.ros
+@pytest.mark.parametrize('history, depth', [(None, 10), ('0.5', 500)])
+def test_the_virtual_object_reads_shapes_best_effort_and_sizes_its_force_history(
+        monkeypatch, history, depth):
+    """The demo's node: no resends of shapes it does not use; forces' history at 1 kHz."""
+    if history is None:
+        monkeypatch.delenv(WRITER_HISTORY_ENV, raising=False)
+    else:
+        monkeypatch.setenv(WRITER_HISTORY_ENV, history)
+    context = Context()
+    rclpy.init(context=context)
+    try:
+        node = VirtualObjectNode(context=context, namespace='/vo')
+        endpoints = list(_endpoints(node))
+        node.destroy_node()
+    finally:
+        context.try_shutdown()
+    shapes = [qos for kind, topic, qos, _ in endpoints if kind == 'sub' and
+              topic.endswith('/shape')]
+    forces = [qos for kind, topic, qos, _ in endpoints if kind == 'pub' and
+              topic.endswith('/tip_force')]
+    assert len(shapes) == len(forces) == 3
+    for qos in shapes:
+        assert (qos.reliability, qos.durability, qos.history, qos.depth) == (
+            ReliabilityPolicy.BEST_EFFORT, DurabilityPolicy.VOLATILE, HistoryPolicy.KEEP_LAST,
+            1)
+    # Reliable and volatile, as the README's tip_force row that its readers follow.
+    reliability, durability, _ = readme_table()['finger_<i>/tip_force'][2]
+    for qos in forces:
+        assert (qos.reliability, qos.durability, qos.depth) == (reliability, durability, depth)
