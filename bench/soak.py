@@ -80,6 +80,7 @@ from timing import machine  # noqa: E402
 from fpc_gripper.io.cdr import header_stamp, INVALID_STAMP  # noqa: E402
 from fpc_gripper.io.config import default_gripper_config_path  # noqa: E402
 from fpc_gripper.io.config import load_gripper_config  # noqa: E402
+from fpc_gripper.io.qos import MAX_STREAM_HZ, writer_history_s, writer_qos  # noqa: E402
 from fpc_gripper.nodes.middleware import apply_middleware_settings  # noqa: E402
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
@@ -114,6 +115,11 @@ MODEL_COUNTERS = ('solves', 'shared', 'coalesced', 'rejected', 'failures')
 #: Deep reader queues, so that this process is not the first to drop.
 PROBE_QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
 RELIABLE = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+#: The probe's command and force writers keep the history the gripper's writers keep
+#: (``FPC_GRIPPER_WRITER_HISTORY_S``, `io.qos.writer_qos`, at up to 1 kHz): at 0.5 s that
+#: holds its largest burst of faults (200), of which a recorder that stalled would otherwise
+#: lose all but 10.
+STREAM = writer_qos(RELIABLE, MAX_STREAM_HZ)
 _PR_SET_PDEATHSIG = 1
 
 
@@ -427,8 +433,8 @@ class Probe(Node):
         self.aperture_pub = self.create_publisher(Float64, 'aperture_command', RELIABLE)
         self.grasp_pub = self.create_publisher(Float64, 'grasp_force_command', RELIABLE)
         self.command_pubs = [self.create_publisher(FluidPressure, f'{f}/pressure_command',
-                                                   RELIABLE) for f in self.fingers]
-        self.force_pubs = [self.create_publisher(WrenchStamped, f'{f}/tip_force', RELIABLE)
+                                                   STREAM) for f in self.fingers]
+        self.force_pubs = [self.create_publisher(WrenchStamped, f'{f}/tip_force', STREAM)
                            for f in self.fingers]
         # Empty payloads get writers of their own. Fast DDS drops a 0-byte payload on
         # receipt and a reliable reader waits for its sequence number, so the writer's
@@ -1357,6 +1363,7 @@ class Soak:
             'started': started, 'machine': machine(), 'workdir': str(self.workdir),
             'config': {'duration_s': args.duration, 'measured_s': duration,
                        'rate_hz': args.rate, 'seed': args.seed, 'faults': list(args.faults),
+                       'writer_history_s': writer_history_s(),
                        'fault_interval_s': args.fault_interval,
                        'sample_period_s': args.sample_period, 'warmup_s': args.warmup,
                        'answer_timeout_s': args.answer_timeout, 'open_s': args.open_s,
