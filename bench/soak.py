@@ -161,7 +161,7 @@ class ProcessStats:
 class NodeProcess:
     """One node in a child process: its log file, resource samples and a clean stop by PID."""
 
-    def __init__(self, name, argv, log_path):
+    def __init__(self, name, argv, log_path, env=None):
         self.name = name
         self.argv = [str(a) for a in argv]
         self.log_path = pathlib.Path(log_path)
@@ -178,7 +178,8 @@ class NodeProcess:
                 self.argv, cwd=ROOT, stdin=subprocess.DEVNULL, stdout=log,
                 stderr=subprocess.STDOUT, start_new_session=True,
                 preexec_fn=_die_with_parent,
-                env={**os.environ, 'FPC_SOAK_HEAP_LOG': str(self.heap_log_path)})
+                env={**os.environ, **(env or {}),
+                     'FPC_SOAK_HEAP_LOG': str(self.heap_log_path)})
         self.pid = self.process.pid
         self.stats = ProcessStats(self.pid)
 
@@ -1033,6 +1034,23 @@ def read_recording(path, probe, junk=frozenset()):
     return out
 
 
+def node_env_item(text):
+    """Parse ``NODE:VAR=VALUE`` (``--node-env``) into ``(node, var, value)``."""
+    node, sep, assignment = text.partition(':')
+    var, eq, value = assignment.partition('=')
+    if not (sep and eq and node and var):
+        raise argparse.ArgumentTypeError(f'--node-env must be NODE:VAR=VALUE, got {text!r}')
+    return node, var, value
+
+
+def node_envs(items):
+    """Gather ``--node-env`` items into node -> {var: value}."""
+    envs = {}
+    for node, var, value in items:
+        envs.setdefault(node, {})[var] = value
+    return envs
+
+
 def count_readable(path):
     """
     Messages readable from the start of a file that has no summary (a recorder that died).
@@ -1180,7 +1198,8 @@ class Soak:
         commands = node_commands(self.args.rate, self.args.seed, self.mcap_path,
                                  self.config_path, composed=self.args.composed)
         for name, argv in commands.items():
-            self.procs[name] = NodeProcess(name, argv, self.workdir / f'{name}.log')
+            self.procs[name] = NodeProcess(name, argv, self.workdir / f'{name}.log',
+                                           self.args.node_env.get(name))
         deadline = time.monotonic() + self.args.startup_timeout
         waiting = set(self.procs)
         while waiting and time.monotonic() < deadline and not self.stop_event.is_set():
@@ -1363,7 +1382,7 @@ class Soak:
             'started': started, 'machine': machine(), 'workdir': str(self.workdir),
             'config': {'duration_s': args.duration, 'measured_s': duration,
                        'rate_hz': args.rate, 'seed': args.seed, 'faults': list(args.faults),
-                       'writer_history_s': writer_history_s(),
+                       'writer_history_s': writer_history_s(), 'node_env': args.node_env,
                        'fault_interval_s': args.fault_interval,
                        'sample_period_s': args.sample_period, 'warmup_s': args.warmup,
                        'answer_timeout_s': args.answer_timeout, 'open_s': args.open_s,
@@ -1530,6 +1549,10 @@ def parse_args(argv):
                              'one process each')
     parser.add_argument('--workdir', default=None,
                         help='node logs and the recording (default a new /tmp/fpc_soak_*)')
+    parser.add_argument('--node-env', action='append', type=node_env_item, default=[],
+                        metavar='NODE:VAR=VALUE',
+                        help='set VAR in one node process only (repeatable), e.g. '
+                             'model_node:FPC_GRIPPER_WRITER_HISTORY_S=0.5')
     parser.add_argument('--keep-mcap', action='store_true',
                         help='keep the recording (some 100 MiB a minute at 200 Hz) after '
                              'reading it')
@@ -1544,6 +1567,11 @@ def parse_args(argv):
         if unknown:
             parser.error(f'unknown fault kinds {unknown}; choose from {list(FAULT_KINDS)}')
     args.faults = kinds
+    args.node_env = node_envs(args.node_env)
+    unknown = sorted(set(args.node_env) - set(STOP_ORDER))
+    if unknown:
+        parser.error(f'--node-env names no node process: {unknown}; choose from '
+                     f'{list(STOP_ORDER)}')
     if args.duration <= 0 or args.rate <= 0 or args.sample_period <= 0:
         parser.error('--duration, --rate and --sample-period must be > 0')
     return args

@@ -23,6 +23,7 @@ from soak import executor_episodes  # noqa: E402
 from soak import FAULT_KINDS  # noqa: E402
 from soak import FaultInjector, is_junk, read_recording, recorder_counts  # noqa: E402
 from soak import heap_slopes, read_heap_log, slope_per_hour, SpilledArray  # noqa: E402
+from soak import parse_args  # noqa: E402
 from soak_nodes import arena_summary, HeapLog  # noqa: E402
 
 from fpc_gripper.io.mcap_writer import Rosbag2McapWriter  # noqa: E402
@@ -431,3 +432,17 @@ def test_malloc_info_sees_free_chunks_between_chunks_in_use():
     # 1,000 free chunks of 3,008 bytes (3,000 and glibc's 8-byte header, 16-aligned).
     assert between(after) - between(before) == pytest.approx(1000 * 3008 / 2 ** 20, rel=0.05)
     assert after['system_mib'] >= after['free_mib'] > 2.8
+
+
+def test_node_env_sets_a_variable_in_one_node_process_and_refuses_what_is_no_assignment(
+        monkeypatch):
+    monkeypatch.setenv('FPC_NETNS', '1')
+    args = parse_args(['--node-env', 'model_node:FPC_GRIPPER_WRITER_HISTORY_S=0.5',
+                       '--node-env', 'model_node:A=b=c', '--node-env', 'virtual_object:X='])
+    assert args.node_env == {'model_node': {'FPC_GRIPPER_WRITER_HISTORY_S': '0.5', 'A': 'b=c'},
+                             'virtual_object': {'X': ''}}
+    for bad in ('model_node', 'model_node:VAR', ':VAR=1', 'model_node:=1'):
+        with pytest.raises(SystemExit):
+            parse_args(['--node-env', bad])
+    with pytest.raises(SystemExit):
+        parse_args(['--node-env', 'no_such_node:VAR=1'])
