@@ -84,6 +84,16 @@ def start_recorder(command, output, diagnostics_period_s):
         stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
 
 
+def _recorder_and_probe(tmp_path, probe_name, diagnostics_period_s):
+    """Start a recorder process into ``stopped.mcap`` and a probe node in a context of its own."""
+    output = tmp_path / 'stopped.mcap'
+    recorder = start_recorder([sys.executable, '-m', 'fpc_gripper.nodes.mcap_recorder'],
+                              output, diagnostics_period_s)
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    return output, recorder, context, Node(probe_name, context=context)
+
+
 def close_probe(recorder, probe, context):
     """Kill the recorder if it still runs (SIGKILL ends a stopped one too), close the probe."""
     if recorder.poll() is None:
@@ -169,12 +179,7 @@ def test_messages_lost_before_a_stopped_recorder_are_counted_and_named(tmp_path)
     missing from the file.
     """
     count, stopped = 600, 400
-    output = tmp_path / 'stopped.mcap'
-    recorder = start_recorder([sys.executable, '-m', 'fpc_gripper.nodes.mcap_recorder'],
-                              output, 0.2)
-    context = rclpy.Context()
-    rclpy.init(context=context)
-    probe = Node('lost_probe', context=context)
+    output, recorder, context, probe = _recorder_and_probe(tmp_path, 'lost_probe', 0.2)
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(probe)
     publisher = probe.create_publisher(Path, TOPIC, STATE_QOS)
@@ -247,12 +252,7 @@ def test_a_recorder_stopped_for_less_than_the_history_loses_no_shape_of_a_deep_w
     continues, and resends them. With keep-last 1 the test above loses most of such a stop.
     """
     count, stopped, rate = 300, 50, 200.0
-    output = tmp_path / 'stopped.mcap'
-    recorder = start_recorder([sys.executable, '-m', 'fpc_gripper.nodes.mcap_recorder'],
-                              output, 0.0)
-    context = rclpy.Context()
-    rclpy.init(context=context)
-    probe = Node('kept_probe', context=context)
+    output, recorder, context, probe = _recorder_and_probe(tmp_path, 'kept_probe', 0.0)
     qos = writer_qos(STATE_QOS, rate, history_s=0.5)
     assert qos.depth == 100
     publisher = probe.create_publisher(Path, TOPIC, qos)
