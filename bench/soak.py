@@ -1019,6 +1019,7 @@ def read_recording(path, probe, junk=frozenset()):
         inside = recorded[(recorded >= got.min()) & (recorded <= got.max())] if got.size \
             else recorded[:0]
         odd = int(probe.invalid_received.get(key, 0))
+        unseen = inside[~np.isin(inside, got)]
         comparison[topic] = {'probe': int(got.size) + odd,
                              'recorded': int(recorded.size) + invalid[topic],
                              'missing_from_recording': int(absent.size)
@@ -1026,12 +1027,20 @@ def read_recording(path, probe, junk=frozenset()):
                              'invalid_stamps': {'probe': odd, 'recorded': invalid[topic]},
                              'missing_at_s': [round((a - probe.t0_ns) * 1e-9, 3)
                                               for a in absent[:200].tolist()],
-                             'recorded_not_probed': int((~np.isin(inside, got)).sum())}
+                             'recorded_not_probed': int(unseen.size),
+                             'recorded_not_probed_per_minute': _per_minute(unseen, probe.t0_ns)}
     out['comparison'] = comparison
     # Times [s] since the measurement began, for the first/last-minute table.
     out['_times'] = tuple((np.concatenate(x) - probe.t0_ns) * 1e-9 if x else np.zeros(0)
                           for x in (probed, missing))
     return out
+
+
+def _per_minute(stamps_ns, t0_ns):
+    """Count `stamps_ns` by the minute since `t0_ns` they fall in: {minute: count}."""
+    minutes = np.floor((np.asarray(stamps_ns, dtype=np.int64) - t0_ns) / (60 * NS))
+    keys, counts = np.unique(minutes.astype(np.int64), return_counts=True)
+    return {int(k): int(c) for k, c in zip(keys, counts)}
 
 
 def node_env_item(text):

@@ -185,6 +185,25 @@ def test_messages_with_invalid_stamps_are_counted_against_the_recording(
         == missing + 1
 
 
+def test_recorded_messages_the_probe_never_got_are_counted_by_minute(tmp_path):
+    # Between the first and the last stamp the probe got, the recording has two it did not
+    # get: one in the first minute after the probe's t0, one in the second.
+    topic = '/finger_0/shape'
+    stamps = [int(s * NS) for s in (0.5, 30.0, 70.0, 130.0)]
+    path = tmp_path / 'r.mcap'
+    with Rosbag2McapWriter(path) as writer:
+        writer.add_topic(topic, 'sensor_msgs/msg/FluidPressure')
+        for k, stamp in enumerate(stamps):
+            writer.write(topic, _pressure(*divmod(stamp, NS), 'finger_0', 1.0e5),
+                         200 * NS + k, stamp)
+    key = ('shape', 'finger_0')
+    probe = types.SimpleNamespace(received={key: [stamps[0], stamps[3]]},
+                                  invalid_received={}, t0_ns=0)
+    compared = read_recording(path, probe)['comparison'][topic]
+    assert (compared['recorded_not_probed'], compared['missing_from_recording']) == (2, 0)
+    assert compared['recorded_not_probed_per_minute'] == {0: 1, 1: 1}
+
+
 class _Writer:
     def __init__(self):
         self.sent = []
