@@ -416,6 +416,7 @@ class Probe(Node):
         self.counting = False
         self.t0 = None
         self.t0_ns = None
+        self.t1_ns = None
         self.latency_t = SpilledArray('d')
         self.latency_ms = SpilledArray('d')
         self.received = {(topic, f): SpilledArray('q') for f in self.fingers
@@ -467,6 +468,10 @@ class Probe(Node):
         self.t0_ns = time.time_ns()
         self.window = Window()
         self.counting = True
+
+    def stop_counting(self):
+        self.t1_ns = time.time_ns()
+        self.counting = False
 
     def take_window(self):
         window, self.window = self.window, Window()
@@ -1016,8 +1021,12 @@ def read_recording(path, probe, junk=frozenset()):
         absent = got[~np.isin(got, recorded)]
         probed.append(got)
         missing.append(absent)
-        inside = recorded[(recorded >= got.min()) & (recorded <= got.max())] if got.size \
-            else recorded[:0]
+        # The span of the counting period the probe's stamps cover: its own junk and stale or
+        # future stamps lie outside that period, and would stretch the span over the
+        # warm-up, when the probe kept nothing.
+        counted = got[(got >= probe.t0_ns) & (got <= probe.t1_ns)]
+        inside = recorded[(recorded >= counted.min()) & (recorded <= counted.max())] \
+            if counted.size else recorded[:0]
         odd = int(probe.invalid_received.get(key, 0))
         unseen = inside[~np.isin(inside, got)]
         comparison[topic] = {'probe': int(got.size) + odd,
@@ -1316,7 +1325,7 @@ class Soak:
             for timer in timers:
                 timer.cancel()
             probe.finish_goal()
-            probe.counting = False
+            probe.stop_counting()
             stopped = self.stop_nodes()
             executor.shutdown(timeout_sec=5.0)
             spinner.join(timeout=5.0)

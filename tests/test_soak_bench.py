@@ -144,7 +144,7 @@ def test_the_recording_check_counts_the_soaks_own_junk_apart_from_a_failure(tmp_
                                            ('/corrupt', corrupt))):
             writer.add_topic(topic, 'sensor_msgs/msg/FluidPressure')
             writer.write(topic, data, NS + i)
-    probe = types.SimpleNamespace(received={}, invalid_received={}, t0_ns=0)
+    probe = types.SimpleNamespace(received={}, invalid_received={}, t0_ns=0, t1_ns=NS ** 2)
     out = read_recording(path, probe, junk={junk, b''})
     assert (out['decoded'], out['junk_sampled'], out['decode_failures']) == (2, 2, 2)
     # Each failure says what it was: the corrupt message, twice (first and last of its topic).
@@ -174,7 +174,8 @@ def test_messages_with_invalid_stamps_are_counted_against_the_recording(
         writer.write(topic, b'\x00\x01\x00\x00\x07', 7 * NS, 7 * NS)
     key = ('pressure_command', 'finger_0')
     probe = types.SimpleNamespace(received={key: [NS, NS + 1, NS + 2]},
-                                  invalid_received={key: probe_odd}, t0_ns=0)
+                                  invalid_received={key: probe_odd}, t0_ns=0,
+                                  t1_ns=NS ** 2)
     compared = read_recording(path, probe)['comparison'][topic]
     assert compared['invalid_stamps'] == {'probe': probe_odd, 'recorded': 1}
     assert compared['missing_from_recording'] == missing
@@ -186,19 +187,22 @@ def test_messages_with_invalid_stamps_are_counted_against_the_recording(
 
 
 def test_recorded_messages_the_probe_never_got_are_counted_by_minute(tmp_path):
-    # Between the first and the last stamp the probe got, the recording has two it did not
-    # get: one in the first minute after the probe's t0, one in the second.
+    # Between the first and the last stamp the probe got while counting, the recording has
+    # two it did not get: one in the first minute after the probe's t0, one in the second.
+    # The warm-up's (-50 s) is outside: the probe's stale stamp (-100 s) does not stretch
+    # the span back over it.
     topic = '/finger_0/shape'
-    stamps = [int(s * NS) for s in (0.5, 30.0, 70.0, 130.0)]
+    t0 = 1000 * NS
+    stamps = [t0 + int(s * NS) for s in (-100.0, -50.0, 0.5, 30.0, 70.0, 130.0)]
     path = tmp_path / 'r.mcap'
     with Rosbag2McapWriter(path) as writer:
         writer.add_topic(topic, 'sensor_msgs/msg/FluidPressure')
         for k, stamp in enumerate(stamps):
             writer.write(topic, _pressure(*divmod(stamp, NS), 'finger_0', 1.0e5),
-                         200 * NS + k, stamp)
+                         t0 + 200 * NS + k, stamp)
     key = ('shape', 'finger_0')
-    probe = types.SimpleNamespace(received={key: [stamps[0], stamps[3]]},
-                                  invalid_received={}, t0_ns=0)
+    probe = types.SimpleNamespace(received={key: [stamps[0], stamps[2], stamps[5]]},
+                                  invalid_received={}, t0_ns=t0, t1_ns=t0 + 200 * NS)
     compared = read_recording(path, probe)['comparison'][topic]
     assert (compared['recorded_not_probed'], compared['missing_from_recording']) == (2, 0)
     assert compared['recorded_not_probed_per_minute'] == {0: 1, 1: 1}
