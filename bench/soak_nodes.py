@@ -18,7 +18,8 @@
 # and clears them all after duration_s.
 # With FPC_SOAK_HEAP_LOG=PATH in its environment, a process also appends its allocator's
 # state to PATH every HEAP_LOG_PERIOD_S (HeapLog), so that the soak can tell memory in use
-# from memory the allocator holds free.
+# from memory the allocator holds free. With FPC_SOAK_MEMRAY=PATH (memray installed, for
+# example through soak.py --node-env), it runs under memray's native tracker, writing PATH.
 
 import ctypes
 import functools
@@ -253,5 +254,16 @@ def main(argv=None):
     return 2
 
 
+def _traced(run):
+    """Run `run` under memray's native tracker where FPC_SOAK_MEMRAY names its output."""
+    path = os.environ.get('FPC_SOAK_MEMRAY')
+    if not path:
+        return run()
+    # Imported only here: memray is a profiling tool, not a dependency of the package.
+    import memray
+    with memray.Tracker(path, native_traces=True):
+        return run()
+
+
 if __name__ == '__main__':
-    sys.exit(main())
+    sys.exit(_traced(main))
