@@ -21,11 +21,10 @@ STATE_QOS = QoSProfile(depth=1, history=HistoryPolicy.KEEP_LAST,
                        reliability=ReliabilityPolicy.RELIABLE,
                        durability=DurabilityPolicy.TRANSIENT_LOCAL)
 #: A reader that uses only the newest sample of a stream and has no use for a resend (the
-#: demo's virtual object reading shapes; model_node and the controller reading tip-force
-#: estimates): best effort, so the samples a writer keeps for a recorder that stalls are
-#: never resent to it. On a saturated machine those resends are more than such a reader
-#: can take, and rclpy's EventsExecutor queues one event for each one, without a bound
-#: (docs/soak.md, "Deeper writer histories"). Any writer matches it, best effort too.
+#: demo's virtual object reading shapes): best effort, so the samples a writer keeps for a
+#: recorder that stalls are never resent to it. On a saturated machine those resends are
+#: more than such a reader can take, and rclpy's EventsExecutor queues one event for each
+#: one, without a bound (docs/soak.md, "Deeper writer histories").
 LATEST_QOS = QoSProfile(depth=1, history=HistoryPolicy.KEEP_LAST,
                         reliability=ReliabilityPolicy.BEST_EFFORT,
                         durability=DurabilityPolicy.VOLATILE)

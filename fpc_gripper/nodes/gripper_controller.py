@@ -6,14 +6,13 @@ Inputs (relative to the namespace): ``aperture_command`` (std_msgs/Float64, [m])
 object [N]), per finger ``finger_<i>/pressure`` (sensor_msgs/FluidPressure, measured,
 absolute [Pa], sensor-data QoS) and ``finger_<i>/tip_force`` (geometry_msgs/WrenchStamped,
 frame ``finger_<i>``: the contact force on the finger, force.x and force.z the resultant
-(F_X, F_Z) [N]; torque is not used; read best effort, the newest only). The object to
-grasp is a parameter (``object``, ``object_diameter``, ``object_height``; ``unknown``: a
-cylinder on the palm axis through the point where contact is felt). Outputs:
-``finger_<i>/pressure_command`` (FluidPressure, ABSOLUTE [Pa] = gauge +
-atmospheric_pressure), ``aperture`` (std_msgs/Float64, the model estimate [m]),
-``contacts`` (visualization_msgs/MarkerArray: each finger's points in contact on the
-object's contact model, in its frame, at 10 Hz at most while any finger is in contact),
-``controller_state`` and ``/diagnostics``. The
+(F_X, F_Z) [N]; torque is not used). The object to grasp is a parameter (``object``,
+``object_diameter``, ``object_height``; ``unknown``: a cylinder on the palm axis through
+the point where contact is felt). Outputs: ``finger_<i>/pressure_command``
+(FluidPressure, ABSOLUTE [Pa] = gauge + atmospheric_pressure), ``aperture``
+(std_msgs/Float64, the model estimate [m]), ``contacts`` (visualization_msgs/MarkerArray:
+each finger's points in contact on the object's contact model, in its frame, at 10 Hz at
+most while any finger is in contact), ``controller_state`` and ``/diagnostics``. The
 ``<node name>/gripper_cmd`` action (control_msgs/GripperCommand) is served by
 :mod:`fpc_gripper.nodes.gripper_action`.
 
@@ -59,7 +58,6 @@ from fpc_gripper.control.inputs import ControllerInputs
 from fpc_gripper.io.config import default_gripper_config_path
 from fpc_gripper.io.config import load_gripper_config
 from fpc_gripper.io.contact_markers import contact_marker
-from fpc_gripper.io.qos import LATEST_QOS
 from fpc_gripper.io.qos import RELIABLE_QOS
 from fpc_gripper.io.qos import STATE_QOS
 from fpc_gripper.io.qos import writer_qos
@@ -133,7 +131,7 @@ class GripperController(Node):
         for i, (name, frame) in enumerate(zip(self._names, self._frames)):
             self._subscribe(FluidPressure, f'{name}/pressure', f'{frame}/pressure',
                             qos_profile_sensor_data, functools.partial(self._on_pressure, i))
-            self._subscribe(WrenchStamped, f'{name}/tip_force', f'{frame}/tip_force', LATEST_QOS,
+            self._subscribe(WrenchStamped, f'{name}/tip_force', f'{frame}/tip_force', RELIABLE_QOS,
                             functools.partial(self._on_tip_force, i))
         self._subscribe(Float64, 'aperture_command', 'aperture_command', RELIABLE_QOS,
                         self._on_aperture)

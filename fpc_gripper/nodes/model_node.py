@@ -16,7 +16,6 @@ from sensor_msgs.msg import FluidPressure
 from fpc_gripper.io.config import default_gripper_config_path
 from fpc_gripper.io.config import load_gripper_config
 from fpc_gripper.io.messages import FingerPlacement
-from fpc_gripper.io.qos import LATEST_QOS
 from fpc_gripper.io.qos import RELIABLE_QOS
 from fpc_gripper.model.pipeline import finger_model
 from fpc_gripper.model.pipeline import ModelSettings
@@ -43,8 +42,7 @@ class ModelNode(Node):
 
     Per finger ``finger_<i>`` of the gripper config it subscribes ``pressure_command`` (or
     ``pressure`` with ``pressure_input:=measured``; absolute [Pa]) and ``tip_force``
-    (frame ``<frame_prefix>finger_<i>``, force.x = f0, force.z = p0 [N]; read best effort,
-    the newest only) and publishes
+    (frame ``<frame_prefix>finger_<i>``, force.x = f0, force.z = p0 [N]) and publishes
     ``shape`` (nav_msgs/Path) and ``curvature`` (std_msgs/Float64, [1/m]) for every
     solved input, ``rigidity`` (x = K_x, z = K_z [N·m²], at most ``rigidity_rate_hz``),
     and ``markers`` and ``gripper_shape`` (MarkerArray in the palm frame; at most 30 Hz
@@ -214,10 +212,8 @@ class ModelNode(Node):
         self._pressure_subs = tuple(
             self._subscribe(i, FluidPressure, self._pressure_topic, qos, self._on_pressure)
             for i in range(len(names)))
-        # A force estimate is a stream whose newest sample is all the model uses: no
-        # resends of a writer's history (docs/soak.md, "Tip forces read best effort").
         self._force_subs = tuple(
-            self._subscribe(i, WrenchStamped, 'tip_force', LATEST_QOS, self._on_tip_force)
+            self._subscribe(i, WrenchStamped, 'tip_force', RELIABLE_QOS, self._on_tip_force)
             for i in range(len(names)))
 
     def _subscribe(self, index, msg_type, topic, qos, callback):
