@@ -1047,8 +1047,8 @@ def read_recording(path, probe, junk=frozenset()):
 
 def _per_minute(stamps_ns, t0_ns):
     """Count `stamps_ns` by the minute since `t0_ns` they fall in: {minute: count}."""
-    minutes = np.floor((np.asarray(stamps_ns, dtype=np.int64) - t0_ns) / (60 * NS))
-    keys, counts = np.unique(minutes.astype(np.int64), return_counts=True)
+    minutes = (np.asarray(stamps_ns, dtype=np.int64) - t0_ns) // (60 * NS)
+    keys, counts = np.unique(minutes, return_counts=True)
     return {int(k): int(c) for k, c in zip(keys, counts)}
 
 
