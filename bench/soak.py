@@ -816,9 +816,9 @@ HEAP_KEYS = ('in_use_mib', 'free_mib', 'pymalloc_blocks', 'main_arena_mib',
              'thread_arenas_mib')
 
 
-def heap_slopes(lines, robust=False):
-    """Slopes per hour of `HEAP_KEYS` over the heap log's lines after the first minute."""
-    after = [line for line in lines if line['t'] > 60.0]
+def heap_slopes(lines, robust=False, since=60.0):
+    """Slopes per hour of `HEAP_KEYS` over the heap log's lines after `since` [s]."""
+    after = [line for line in lines if line['t'] > since]
     return {key: slope_per_hour([line['t'] for line in after],
                                 [line.get(key, math.nan) for line in after], robust)
             for key in HEAP_KEYS}
@@ -1358,9 +1358,15 @@ class Soak:
         stopped['left_running'] = left
         return stopped
 
-    def _rss_slopes(self, names, robust):
-        """Each process's RSS slope [MiB/h] over the samples after the first minute."""
-        after = [s for s in self.samples if s['t'] > 60.0]
+    def _rss_slopes(self, names, robust, since=60.0):
+        """
+        Each process's RSS slope [MiB/h] over the samples after `since` [s].
+
+        The whole run's slope (after the first minute) cannot tell a pool that fills and
+        stops from a leak; the second half's, beside it, can: a fill flattens, a leak keeps
+        its slope.
+        """
+        after = [s for s in self.samples if s['t'] > since]
         return {name: slope_per_hour([s['t'] for s in after],
                                      [s['proc'][name].get('rss_mib', math.nan) for s in after],
                                      robust)
@@ -1395,6 +1401,8 @@ class Soak:
             if lines:
                 heap[name] = {'slope_per_h': heap_slopes(lines),
                               'slope_theil_sen_per_h': heap_slopes(lines, robust=True),
+                              'slope_second_half_per_h': heap_slopes(lines,
+                                                                     since=duration / 2),
                               'samples': lines}
         results = {
             'started': started, 'machine': machine(), 'workdir': str(self.workdir),
@@ -1417,6 +1425,8 @@ class Soak:
                                      'shape_gaps')},
             'rss_slope_mib_per_h': self._rss_slopes(names, robust=False),
             'rss_slope_theil_sen_mib_per_h': self._rss_slopes(names, robust=True),
+            'rss_slope_second_half_mib_per_h': self._rss_slopes(names, robust=False,
+                                                                since=duration / 2),
             'heap': heap,
             'faults': faults.events, 'fault_counts': dict(sorted(kinds.items())),
             'goals': goals,
@@ -1442,10 +1452,13 @@ class Soak:
         print('RSS slope after the first minute [MiB/h], least squares (Theil-Sen): ' + ', '.join(
             f'{n} {v:+.1f} ({results["rss_slope_theil_sen_mib_per_h"][n]:+.1f})'
             for n, v in results['rss_slope_mib_per_h'].items()))
+        print('RSS slope over the second half [MiB/h], least squares: ' + ', '.join(
+            f'{n} {v:+.1f}' for n, v in results['rss_slope_second_half_mib_per_h'].items()))
         for name, log in heap.items():
             ls, ts = log['slope_per_h'], log['slope_theil_sen_per_h']
             print(f'{name} allocator after the first minute, least squares (Theil-Sen): '
-                  f'malloc in use {ls["in_use_mib"]:+.1f} ({ts["in_use_mib"]:+.1f}) MiB/h, '
+                  f'malloc in use {ls["in_use_mib"]:+.1f} ({ts["in_use_mib"]:+.1f}) MiB/h '
+                  f'(second half {log["slope_second_half_per_h"]["in_use_mib"]:+.1f}), '
                   f'held free {ls["free_mib"]:+.1f} ({ts["free_mib"]:+.1f}) MiB/h, pymalloc '
                   f'blocks {ls["pymalloc_blocks"]:+.0f} ({ts["pymalloc_blocks"]:+.0f}) /h'
                   f'{_arena_text(log["samples"][-1], ls, ts)}{_trim_text(log["samples"][-1])}')

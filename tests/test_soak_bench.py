@@ -349,6 +349,20 @@ def test_heap_slopes_skip_the_first_minute_and_a_cut_last_line(tmp_path):
     assert read_heap_log(tmp_path / 'none.jsonl', 0.0) == []
 
 
+def test_the_second_halfs_slope_tells_a_pool_that_fills_from_a_leak():
+    # A pool filling at 12 MiB/h for 15 minutes, then full; and a leak at 1 MiB/h.
+    t = np.arange(0.0, 1800.0, 5.0)
+    fill = 100.0 + np.minimum(t, 900.0) * 12.0 / 3600.0
+    leak = 100.0 + t / 3600.0
+    lines = [{'t': float(ti), 'in_use_mib': float(f), 'free_mib': float(k),
+              'pymalloc_blocks': 0.0} for ti, f, k in zip(t, fill, leak)]
+    whole, half = heap_slopes(lines), heap_slopes(lines, since=900.0)
+    assert whole['in_use_mib'] > 4.0                     # the whole run calls the fill growth
+    assert half['in_use_mib'] == pytest.approx(0.0, abs=1e-9)
+    assert whole['free_mib'] == pytest.approx(1.0, rel=1e-9)
+    assert half['free_mib'] == pytest.approx(1.0, rel=1e-9)
+
+
 def test_heap_slopes_of_the_main_arena_and_the_others(tmp_path):
     path = tmp_path / 'h.jsonl'
     # The main arena flat at 130 MiB; two thread arenas, one growing 3 MiB in 30 minutes.
