@@ -17,10 +17,11 @@ from fpc_gripper.services.periods import period_passed
 
 REGISTER_TYPES = ('holding', 'input')
 
-_TOP_KEYS = ('connection', 'scaling', 'noise_std_pa', 'channels')
+_TOP_KEYS = ('connection', 'scaling', 'noise_std_pa', 'channels', 'watchdog')
 _CONNECTION_KEYS = ('host', 'port', 'device_id', 'unit', 'timeout_s')
 _CHANNEL_KEYS = ('name', 'setpoint', 'readback', 'scaling')
 _REGISTER_KEYS = ('address', 'type')
+_WATCHDOG_KEYS = ('register', 'timeout_s', 'counts_per_s')
 _SCALING_KEYS = ('counts_per_pa', 'full_scale_counts', 'full_scale_pa', 'offset_counts',
                  'signed')
 #: Bounds of a register map: channels, name and host lengths, request timeout [s] and the
@@ -105,6 +106,37 @@ class ChannelMap:
 
 
 @dataclasses.dataclass(frozen=True)
+class DeviceWatchdog:
+    """
+    The device's own communication watchdog: the register that arms it, and its timeout.
+
+    The contract a device must meet (the simulated one does, `modbus_sim`): a write of
+    ``word`` to `register` arms it with a timeout of ``word / counts_per_s`` seconds (0
+    disarms it); when no setpoint register is written for longer than that, every channel
+    vents to 0 Pa gauge until the next setpoint write. The bridge writes every setpoint at
+    each control step, so only a bridge that has died, hung or lost its link lets it expire.
+
+    Attributes
+    ----------
+    register : Register
+        The holding register that takes the timeout.
+    timeout_s : float
+        Timeout the backend arms at each connection [s].
+    counts_per_s : float
+        The register's unit [count/s]: 1000 for milliseconds, 10 for tenths of a second.
+    """
+
+    register: Register
+    timeout_s: float
+    counts_per_s: float = 1000.0
+
+    @property
+    def word(self):
+        """The register word for `timeout_s`."""
+        return round(self.timeout_s * self.counts_per_s)
+
+
+@dataclasses.dataclass(frozen=True)
 class RegisterMap:
     """
     Connection settings and per-channel registers of a Modbus TCP regulator.
@@ -123,6 +155,9 @@ class RegisterMap:
         Request timeout [s].
     noise_std_pa : float
         Standard deviation of the readback noise [Pa], for the reported variance.
+    watchdog : DeviceWatchdog or None
+        The device's communication watchdog, armed at every connection (None: the device
+        has none, and only the bridge's own watchdog guards the outputs).
     """
 
     channels: typing.Tuple[ChannelMap, ...]
@@ -131,6 +166,7 @@ class RegisterMap:
     device_id: int = 1
     timeout_s: float = 0.5
     noise_std_pa: float = 0.0
+    watchdog: typing.Optional[DeviceWatchdog] = None
 
     @classmethod
     def from_yaml(cls, path):
@@ -191,8 +227,11 @@ class RegisterMap:
             name = (at / 'name').string(entry.get('name', f'channel_{i}'), MAX_NAME_CHARS)
             parsed.append(ChannelMap(setpoint=setpoint, readback=readback, scaling=scaling,
                                      name=name))
+        watchdog = None
+        if 'watchdog' in top:
+            watchdog = _watchdog(top['watchdog'], where / 'watchdog', parsed)
         return cls(channels=tuple(parsed), host=host, port=port, device_id=device_id,
-                   timeout_s=timeout, noise_std_pa=noise)
+                   timeout_s=timeout, noise_std_pa=noise, watchdog=watchdog)
 
 
 class ModbusRegulator:
@@ -241,14 +280,24 @@ class ModbusRegulator:
         self._fault = None
         self._last_attempt = None
 
+    @property
+    def device_watchdog_s(self):
+        """The timeout of the device's own watchdog [s], or None if the map gives none."""
+        watchdog = self.register_map.watchdog
+        return None if watchdog is None else watchdog.timeout_s
+
     def connect(self):
         """
-        Open the TCP connection; a no-op while connected.
+        Open the TCP connection and arm the device's watchdog; a no-op while connected.
+
+        The watchdog is armed at every connection, because a device that lost power or
+        was replaced comes back disarmed.
 
         Raises
         ------
         BackendFault
-            If pymodbus is missing or the device cannot be reached.
+            If pymodbus is missing, the device cannot be reached, or it refuses its
+            watchdog's timeout.
         """
         if self._client is None:
             try:
@@ -269,7 +318,21 @@ class ModbusRegulator:
             if not self._client.connect():
                 rmap = self.register_map
                 raise self._failed(f'cannot connect to {rmap.host}:{rmap.port}')
+            self._arm_watchdog()
         self._fault = None
+
+    def _arm_watchdog(self):
+        watchdog = self.register_map.watchdog
+        if watchdog is None:
+            return
+        try:
+            self._request('write_register', watchdog.register.address, watchdog.word)
+        except BackendFault as exc:
+            # Not connected: the next attempt arms it again, before any setpoint goes out.
+            self._client.close()
+            raise self._failed(f'cannot arm the device watchdog (register '
+                               f'{watchdog.register.address}, {watchdog.timeout_s:g} s): '
+                               f'{exc}') from exc
 
     def close(self):
         """Close the connection; safe to call more than once."""
@@ -382,6 +445,28 @@ def _register(value, where):
     address = (where / 'address').integer(entry['address'], 0, 0xFFFF)
     kind = (where / 'type').choice(entry.get('type', 'holding'), REGISTER_TYPES)
     return Register(address=address, kind=kind)
+
+
+def _watchdog(value, where, channels):
+    entry = where.mapping(value, _WATCHDOG_KEYS)
+    for required in ('register', 'timeout_s'):
+        if required not in entry:
+            raise (where / required).error('is missing')
+    register = _register(entry['register'], where / 'register')
+    if register.kind != 'holding':
+        raise (where / 'register' / 'type').error(
+            f"must be 'holding' (the backend writes the timeout), got {register.kind!r}")
+    taken = {c.setpoint.address: c.name for c in channels}
+    taken.update({c.readback.address: c.name for c in channels if c.readback.kind == 'holding'})
+    if register.address in taken:
+        raise (where / 'register' / 'address').error(
+            f'{register.address} is a register of channel {taken[register.address]!r}')
+    rate = (where / 'counts_per_s').number(entry.get('counts_per_s', 1000.0), '[count/s]',
+                                           0.0, 1.0e6, low_open=True)
+    # At least one count, and no more than a 16-bit word holds.
+    timeout = (where / 'timeout_s').number(entry['timeout_s'], '[s]', 1.0 / rate,
+                                           0xFFFF / rate)
+    return DeviceWatchdog(register=register, timeout_s=timeout, counts_per_s=rate)
 
 
 def _scaling(value, where):

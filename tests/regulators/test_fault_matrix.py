@@ -24,6 +24,7 @@ from fpc_gripper.regulators.core import MonitorSettings
 from fpc_gripper.regulators.core import RegulatorCore
 from fpc_gripper.regulators.modbus import ModbusRegulator
 from fpc_gripper.regulators.modbus import RegisterMap
+from fpc_gripper.regulators.modbus_sim import SimulatedModbusDevice
 from fpc_gripper.regulators.safety import SupervisorMode
 from fpc_gripper.regulators.sim import SimulatedRegulator
 
@@ -35,7 +36,6 @@ MONITOR = MonitorSettings(tracking_tolerance_pa=2.0e4, tracking_timeout_s=2.0,
                           overpressure_margin_pa=5.0e4, reconnect_interval_s=1.0)
 # 4-20 mA style map: 819 counts at 0 Pa, 4095 at 1 MPa, so a word of 0 is a broken wire.
 OFFSET, FULL_COUNTS, FULL_PA = 819, 4095, 1.0e6
-FC_INPUT = 4
 SAFE_MODES = (SupervisorMode.FAULT, SupervisorMode.WATCHDOG)
 
 
@@ -135,55 +135,36 @@ class ModbusRig(Rig):
 
     def __init__(self):
         super().__init__()
-        self.override = [None, None]
-        self.fail_writes = False
         self.stopped = False
-        self.server = Server(action=self._action)
         scaling = {'full_scale_counts': FULL_COUNTS, 'full_scale_pa': FULL_PA,
                    'offset_counts': OFFSET}
         rmap = RegisterMap.from_dict({
-            'connection': {'host': '127.0.0.1', 'port': self.server.port, 'timeout_s': 0.5},
+            'connection': {'host': '127.0.0.1', 'timeout_s': 0.5},
             'scaling': scaling,
             'channels': [{'setpoint': {'address': i}, 'readback': {'address': i,
                                                                    'type': 'input'}}
                          for i in range(2)]})
-        self.gain = rmap.channels[0].scaling.counts_per_pa
-        self.backend = Recorder(ModbusRegulator(rmap, reconnect_interval_s=0.5,
-                                                clock=self.clock))
+        self.modbus = SimulatedModbusDevice(rmap, self.device, self.clock)
+        self.server = Server(action=self.modbus.action)
+        self.backend = Recorder(ModbusRegulator(rmap, port=self.server.port,
+                                                reconnect_interval_s=0.5, clock=self.clock))
         self.backend.connect()
-
-    async def _action(self, function_code, start, address, count, registers, values):
-        from pymodbus.constants import ExcCodes
-        if values:
-            if self.fail_writes:
-                return ExcCodes.DEVICE_FAILURE
-            for k, word in enumerate(values):
-                self.device.set_pressure(address + k, (word - OFFSET) / self.gain)
-        elif function_code == FC_INPUT:
-            for k in range(count):
-                channel = address + k
-                word = self.override[channel]
-                if word is None:
-                    pressure = self.device.read_pressure(channel)[0]
-                    word = min(max(round(OFFSET + pressure * self.gain), 0), 0xFFFF)
-                registers[address - start + k] = word
-        return None
 
     def inject(self, fault):
         if self.inject_device(fault):
             return
         if fault in ('over_range', 'under_range'):
-            self.override[0] = 0xFFFF if fault == 'over_range' else 0
+            self.modbus.readback_words[0] = 0xFFFF if fault == 'over_range' else 0
         elif fault == 'disconnect':
             self.server.stop()
             self.stopped = True
         elif fault == 'write_fails':
-            self.fail_writes = True
+            self.modbus.fail_writes = True
 
     def clear(self):
         self.device.clear_faults()
-        self.override = [None, None]
-        self.fail_writes = False
+        self.modbus.readback_words.clear()
+        self.modbus.fail_writes = False
         if self.stopped:
             self.server.start()
             self.stopped = False
