@@ -145,7 +145,8 @@ class RegulatorBridge(SelfActivatingNode):
         self._start_timer()
         self.get_logger().info(
             f'active: {len(self.finger_names)} channels on backend {self._session.kind}, '
-            f'max_pressure {self.supervisors[0].max_pressure:.0f} Pa gauge')
+            f'max_pressure {self.supervisors[0].max_pressure:.0f} Pa gauge'
+            f'{_device_watchdog_text(self._session.device_watchdog_s, self._session.kind)}')
         return super().on_activate(state)
 
     def on_deactivate(self, state):
@@ -187,7 +188,9 @@ class RegulatorBridge(SelfActivatingNode):
     def _refusal(self, changes):
         return next(filter(None, (
             refusal(name, value, configured=self._configured, state=self.lifecycle_state,
-                    backend_kind=self._session.kind) for name, value in changes.items())), None)
+                    backend_kind=self._session.kind,
+                    device_watchdog_s=self._session.device_watchdog_s)
+            for name, value in changes.items())), None)
 
     def _apply_parameters(self, parameters):
         names = {p.name for p in parameters}
@@ -346,6 +349,12 @@ class RegulatorBridge(SelfActivatingNode):
             name=f'{self.get_fully_qualified_name()}: {self.finger_names[index]}',
             message=report.message, hardware_id=f'{kind}:{index}',
             values=[KeyValue(key=k, value=v) for k, v in values.items()])
+
+
+def _device_watchdog_text(timeout_s, kind):
+    if timeout_s is not None:
+        return f', device watchdog {timeout_s:g} s'
+    return ', no device watchdog (the map names none)' if kind == 'modbus' else ''
 
 
 def main(args=None):

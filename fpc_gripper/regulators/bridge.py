@@ -7,6 +7,7 @@ from fpc_gripper.regulators.bridge_parameters import limits
 from fpc_gripper.regulators.bridge_parameters import refusal
 from fpc_gripper.regulators.bridge_parameters import SIM_PARAMETERS
 from fpc_gripper.regulators.bridge_parameters import SIM_TIME_REFUSED
+from fpc_gripper.regulators.bridge_parameters import watchdog_refusal
 from fpc_gripper.regulators.core import Level
 from fpc_gripper.regulators.core import MonitorSettings
 from fpc_gripper.regulators.core import RegulatorCore
@@ -129,6 +130,11 @@ class BridgeSession:
         self._register_map = None
         self.diagnostics = DiagnosticsSchedule()
 
+    @property
+    def device_watchdog_s(self):
+        """The timeout of the connected device's own watchdog [s], or None if it has none."""
+        return getattr(self.backend, 'device_watchdog_s', None)
+
     def limits(self, values):
         """Return the supervisors' limits of the parameter `values`, capped by the config."""
         return limits(values, self.config_max_pressure)
@@ -164,6 +170,11 @@ class BridgeSession:
         config, self._register_map = load_bridge_config(
             values['gripper_config'], values['backend'] if self._injected is None
             else 'injected', values['modbus_config'])
+        watchdog = None if self._register_map is None else self._register_map.watchdog
+        reason = watchdog_refusal(None if watchdog is None else watchdog.timeout_s,
+                                  values['publish_rate_hz'])
+        if reason is not None:
+            raise ConfigError(values['modbus_config'], 'watchdog.timeout_s', reason)
         self.finger_names = tuple(f.name for f in config.fingers)
         self.frames = tuple(values['frame_prefix'] + name for name in self.finger_names)
         self.config_max_pressure = float(config.max_pressure)

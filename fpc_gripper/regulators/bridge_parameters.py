@@ -7,8 +7,9 @@ from fpc_gripper.regulators.factory import BACKEND_KINDS
 from fpc_gripper.regulators.safety import SafeState
 from fpc_gripper.services.input_limits import atmospheric_pressure_row
 
-__all__ = ['BOUND_PARAMETERS', 'LIMIT_PARAMETERS', 'PARAMETERS', 'SAFE_STATES',
-           'SIM_PARAMETERS', 'SIM_TIME_REFUSED', 'STRUCTURAL', 'limits', 'refusal']
+__all__ = ['BOUND_PARAMETERS', 'DEVICE_WATCHDOG_PERIODS', 'LIMIT_PARAMETERS', 'PARAMETERS',
+           'SAFE_STATES', 'SIM_PARAMETERS', 'SIM_TIME_REFUSED', 'STRUCTURAL', 'limits',
+           'refusal', 'watchdog_refusal']
 
 SAFE_STATES = tuple(s.value for s in SafeState)
 
@@ -30,6 +31,10 @@ SIM_TIME_REFUSED = ('`use_sim_time` is true with backend modbus: a real regulato
                     'the wall clock (its watchdog, rate limit and safe state follow the node '
                     'clock, and a stopped /clock would hold its last pressure); use backend '
                     'sim on simulated time')
+
+#: The fewest control periods a device's own watchdog may last: the bridge writes every
+#: setpoint once a period, so a shorter one would vent the device at one late step.
+DEVICE_WATCHDOG_PERIODS = 3
 
 #: ``(name, default, description, descriptor fields)`` of every parameter but the input
 #: bounds, ranges as ``(low, high)``.
@@ -92,7 +97,26 @@ PARAMETERS = (
 )
 
 
-def refusal(name, value, *, configured=False, state='', backend_kind=''):
+def watchdog_refusal(device_watchdog_s, publish_rate_hz):
+    """
+    Return why a device watchdog of `device_watchdog_s` [s] is too short at `publish_rate_hz`.
+
+    None when it lasts `DEVICE_WATCHDOG_PERIODS` control periods or more, or when the device
+    has none (`device_watchdog_s` None).
+    """
+    if device_watchdog_s is None:
+        return None
+    least = DEVICE_WATCHDOG_PERIODS / float(publish_rate_hz)
+    if device_watchdog_s >= least:
+        return None
+    return (f"the device watchdog's timeout_s {device_watchdog_s:g} s is shorter than "
+            f'{DEVICE_WATCHDOG_PERIODS} control periods at `publish_rate_hz` '
+            f'{float(publish_rate_hz):g} Hz ({least:g} s): the device would vent at one late '
+            'step')
+
+
+def refusal(name, value, *, configured=False, state='', backend_kind='',
+            device_watchdog_s=None):
     """
     Return why the bridge refuses to set a parameter now, or None when it accepts it.
 
@@ -107,6 +131,8 @@ def refusal(name, value, *, configured=False, state='', backend_kind=''):
         Label of the lifecycle state, for the reason.
     backend_kind : str
         The backend in use ('sim', 'modbus', 'injected', or '' before the first).
+    device_watchdog_s : float or None
+        The timeout of the connected device's own watchdog [s], if it has one.
 
     """
     if name in STRUCTURAL and configured:
@@ -118,6 +144,8 @@ def refusal(name, value, *, configured=False, state='', backend_kind=''):
         return SIM_TIME_REFUSED
     if name == 'safe_state' and value not in SAFE_STATES:
         return f'`safe_state` must be one of {list(SAFE_STATES)}, got {value!r}'
+    if name == 'publish_rate_hz':
+        return watchdog_refusal(device_watchdog_s, value)
     return None
 
 

@@ -446,7 +446,12 @@ class RegulatorCore:
             'rejected_commands': str(channel.rejected),
             'lost_commands': str(channel.lost),
             'last_rejection': channel.last_rejection,
+            'device_watchdog_s': _seconds(getattr(self.backend, 'device_watchdog_s', None)),
         }
         message = output.reason if channel.rejection is None else \
             f'{output.reason}; {channel.rejection}'
         return ChannelReport(level, output.mode, message, values)
+
+
+def _seconds(value):
+    return 'none' if value is None else f'{value:g}'
