@@ -1,6 +1,7 @@
 """A simulated Modbus regulator: the device a register map describes, over a SimulatedRegulator."""
 
 import asyncio
+import dataclasses
 import time
 
 __all__ = ['SimulatedModbusDevice']
@@ -136,6 +137,6 @@ class SimulatedModbusDevice:
 
 def _word(scaling, pressure):
     """Return the 16-bit word of `pressure` [Pa gauge], limited to what the word can hold."""
+    # A sensor's word may leave the setpoint's full scale (an over- or under-range reading).
     low, high = (-0x8000, 0x7FFF) if scaling.signed else (0, 0xFFFF)
-    counts = round(scaling.offset_counts + scaling.counts_per_pa * pressure)
-    return min(max(counts, low), high) & 0xFFFF
+    return dataclasses.replace(scaling, min_counts=low, max_counts=high).to_counts(pressure)
