@@ -483,3 +483,25 @@ def test_node_env_sets_a_variable_in_one_node_process_and_refuses_what_is_no_ass
             parse_args(['--node-env', bad])
     with pytest.raises(SystemExit):
         parse_args(['--node-env', 'no_such_node:VAR=1'])
+
+
+def test_the_reader_pool_bench_varies_only_the_readers_sample_limit():
+    from xml.etree import ElementTree
+
+    from reader_pool import profile_text
+
+    from fpc_gripper.nodes.middleware import PROFILE
+
+    ns = {'dds': 'http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles'}
+
+    def limits(text):
+        found = ElementTree.fromstring(text).find(
+            './/dds:data_reader/dds:topic/dds:resourceLimitsQos', ns)
+        return None if found is None else {e.tag.split('}')[1]: int(e.text) for e in found}
+
+    assert limits(PROFILE.read_text()) == {'max_samples': 1000,
+                                           'max_samples_per_instance': 1000}
+    assert limits(profile_text(None)) is None
+    assert limits(profile_text(50)) == {'max_samples': 50, 'max_samples_per_instance': 50}
+    # Everything else is the package's profile.
+    assert profile_text(1000).split('<dds')[1] == PROFILE.read_text().split('<dds')[1]
