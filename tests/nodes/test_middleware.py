@@ -113,6 +113,30 @@ def test_the_profile_is_installed_with_the_package():
     assert text.count('<historyMemoryPolicy>DYNAMIC</historyMemoryPolicy>') == 2
 
 
+def test_readers_are_limited_below_fast_dds_default_and_above_every_readers_depth():
+    from xml.etree import ElementTree
+
+    from rclpy.qos import qos_profile_parameters
+    from rclpy.qos import qos_profile_sensor_data
+
+    from fpc_gripper.io import qos
+
+    ns = {'dds': 'http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles'}
+    readers = ElementTree.parse(PROFILE).getroot().findall('.//dds:data_reader', ns)
+    assert len(readers) == 1
+    limits = readers[0].find('dds:topic/dds:resourceLimitsQos', ns)
+    max_samples = int(limits.find('dds:max_samples', ns).text)
+    per_instance = int(limits.find('dds:max_samples_per_instance', ns).text)
+    # Fast DDS's default is 5000: the limit is what bounds a reader's pool of changes.
+    assert per_instance == max_samples < 5000
+    # Fast DDS would cut a keep-last reader deeper than the limit to it: none is.
+    depths = [qos_profile_parameters.depth, qos_profile_sensor_data.depth] + [
+        getattr(qos, name).depth for name in qos.__all__ if name.endswith('_QOS')]
+    assert max(depths) == 1000 and max_samples >= max(depths)
+    assert not ElementTree.parse(PROFILE).getroot().findall('.//dds:data_writer/dds:topic',
+                                                            ns)
+
+
 # A reliable keep-all reader that lets 12 messages of 1 MB queue before it takes any, then
 # takes them all: glibc's bytes in use (mallinfo2) before the burst, after it is taken, and
 # what the depth-1 reader of a 5-message burst received (the ROS QoS must still hold).
