@@ -206,6 +206,8 @@ class RegulatorCore:
         ranges = getattr(backend, 'readback_range', None)
         self._ranges = [ranges(i) if ranges is not None else (-math.inf, math.inf)
                         for i in range(len(self._channels))]
+        watchdog_s = getattr(backend, 'device_watchdog_s', None)
+        self._device_watchdog = 'none' if watchdog_s is None else f'{watchdog_s:g}'
 
     @property
     def supervisors(self):
@@ -446,12 +448,8 @@ class RegulatorCore:
             'rejected_commands': str(channel.rejected),
             'lost_commands': str(channel.lost),
             'last_rejection': channel.last_rejection,
-            'device_watchdog_s': _seconds(getattr(self.backend, 'device_watchdog_s', None)),
+            'device_watchdog_s': self._device_watchdog,
         }
         message = output.reason if channel.rejection is None else \
             f'{output.reason}; {channel.rejection}'
         return ChannelReport(level, output.mode, message, values)
-
-
-def _seconds(value):
-    return 'none' if value is None else f'{value:g}'
