@@ -431,6 +431,11 @@ class ModbusRegulator:
         return BackendFault(message)
 
 
+def word_range(signed):
+    """Return the (low, high) counts a 16-bit register holds, as int16 if `signed`."""
+    return (-0x8000, 0x7FFF) if signed else (0, 0xFFFF)
+
+
 def _integer(value, name, low, high):
     if isinstance(value, bool) or not hasattr(value, '__index__') \
             or not low <= int(value) <= high:
@@ -472,7 +477,7 @@ def _watchdog(value, where, channels):
 def _scaling(value, where):
     entry = where.mapping(value, _SCALING_KEYS)
     signed = (where / 'signed').boolean(entry.get('signed', False))
-    low, high = (-0x8000, 0x7FFF) if signed else (0, 0xFFFF)
+    low, high = word_range(signed)
     offset = (where / 'offset_counts').number(entry.get('offset_counts', 0), '[count]', low,
                                               high)
     has_gain = 'counts_per_pa' in entry

@@ -4,6 +4,8 @@ import asyncio
 import dataclasses
 import time
 
+from fpc_gripper.regulators.modbus import word_range
+
 __all__ = ['SimulatedModbusDevice']
 
 #: The Modbus function code of a read of input registers.
@@ -138,5 +140,5 @@ class SimulatedModbusDevice:
 def _word(scaling, pressure):
     """Return the 16-bit word of `pressure` [Pa gauge], limited to what the word can hold."""
     # A sensor's word may leave the setpoint's full scale (an over- or under-range reading).
-    low, high = (-0x8000, 0x7FFF) if scaling.signed else (0, 0xFFFF)
+    low, high = word_range(scaling.signed)
     return dataclasses.replace(scaling, min_counts=low, max_counts=high).to_counts(pressure)
