@@ -145,9 +145,10 @@ def stall(pids, duration, seed):
 
 def in_use(path):
     """Return [(t [s] since the first line, glibc's bytes in use [MiB])] of a heap log."""
-    rows = [json.loads(line) for line in pathlib.Path(path).read_text().splitlines()
-            if line.strip().endswith('}')]
-    return [(row['t'] - rows[0]['t'], row['in_use_mib']) for row in rows if 'in_use_mib' in row]
+    from soak import read_heap_log                 # the soak's reader of the same logs
+    lines = read_heap_log(path, 0.0)
+    return [(line['t'] - lines[0]['t'], line['in_use_mib']) for line in lines
+            if 'in_use_mib' in line]
 
 
 def run(args):
