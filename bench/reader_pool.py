@@ -2,7 +2,7 @@
 
 # Usage (each pair in its own ROS domain, inside the private network namespace):
 #   scripts/isolated .venv/bin/python bench/reader_pool.py [--duration 300] [--depth 500]
-#       [--limits default,1000,50] [--out PATH]
+#       [--limits default,1000,100] [--out PATH]
 # For each limit, one writer process publishes model_node's inputs (three fingers'
 # pressure_command and tip_force, 200 Hz each, reliable, keep-last --depth) and one reader
 # process takes them (six raw reliable keep-last-10 subscriptions, a callback that only
@@ -36,21 +36,21 @@ FINGERS = 3
 STALL_PERIOD_S = 2.5
 STALL_RANGE_S = (0.2, 1.0)
 HEAP_PERIOD_S = 5.0
-_LIMITS = re.compile(r'\s*<topic>\s*<resourceLimitsQos>.*?</resourceLimitsQos>\s*</topic>',
-                     re.DOTALL)
+_READER = re.compile(r'(<data_reader [^>]*>)')
 
 
 def profile_text(limit):
     """Return the package's profile, its readers' sample limit `limit` (None: Fast DDS's)."""
     text = PROFILE.read_text()
-    if _LIMITS.search(text) is None:
-        raise RuntimeError(f'{PROFILE} has no reader resourceLimitsQos to vary')
-    block = '' if limit is None else (
-        '\n      <topic>\n        <resourceLimitsQos>\n'
-        f'          <max_samples>{limit}</max_samples>\n'
-        f'          <max_samples_per_instance>{limit}</max_samples_per_instance>\n'
-        '        </resourceLimitsQos>\n      </topic>')
-    return _LIMITS.sub(block, text, count=1)
+    if len(_READER.findall(text)) != 1 or 'resourceLimitsQos' in text:
+        raise RuntimeError(f'{PROFILE} has no single data reader without limits to vary')
+    if limit is None:
+        return text
+    block = ('\n      <topic>\n        <resourceLimitsQos>\n'
+             f'          <max_samples>{limit}</max_samples>\n'
+             f'          <max_samples_per_instance>{limit}</max_samples_per_instance>\n'
+             '        </resourceLimitsQos>\n      </topic>')
+    return _READER.sub(lambda m: m.group(1) + block, text, count=1)
 
 
 def writer(depth, duration):
@@ -99,7 +99,7 @@ def reader(heap_path):
     apply_allocator_settings()            # as the nodes do, before rclpy starts threads
     import rclpy
     from geometry_msgs.msg import WrenchStamped
-    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
     from sensor_msgs.msg import FluidPressure
     from soak_nodes import HeapLog
 
@@ -122,8 +122,8 @@ def reader(heap_path):
     executor.add_node(node)
     try:
         executor.spin()
-    except KeyboardInterrupt:
-        pass
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass  # SIGINT: rclpy's handler shuts the context down under the spin
     print(f'taken {taken[0]}', flush=True)
 
 
@@ -187,15 +187,18 @@ def run(args):
                     process.wait()
             log.close()
     results = {'depth': args.depth, 'duration_s': args.duration, 'seed': args.seed,
-               'workdir': str(work), 'readers': {}}
+               'workdir': str(work), 'readers': {}, 'taken': {}}
     print(f'writers keep-last {args.depth}; readers stopped {STALL_RANGE_S[0]}-'
           f'{STALL_RANGE_S[1]} s every {STALL_PERIOD_S} s; malloc in use [MiB] by minute:')
     for name, heap, *_ in pairs:
         curve = in_use(heap)
         results['readers'][name] = curve
+        taken = re.findall(r'^taken (\d+)$', (work / f'reader_{name}.log').read_text(), re.M)
+        results['taken'][name] = int(taken[-1]) if taken else None
         minutes = [v for t, v in curve if t % 60.0 < HEAP_PERIOD_S] + [curve[-1][1]]
         print(f'  limit {name:>7}: ' + ', '.join(f'{v:.2f}' for v in minutes)
-              + f' (+{curve[-1][1] - curve[0][1]:.2f} over {curve[-1][0]:.0f} s)')
+              + f' (+{curve[-1][1] - curve[0][1]:.2f} over {curve[-1][0]:.0f} s); '
+              f'samples taken {results["taken"][name]}')
     out = pathlib.Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(results, indent=1) + '\n')
@@ -209,7 +212,7 @@ def main(argv=None):
     parser.add_argument('--heap', help=argparse.SUPPRESS)
     parser.add_argument('--duration', type=float, default=300.0, help='[s] of stalls')
     parser.add_argument('--depth', type=int, default=500, help="the writers' keep-last depth")
-    parser.add_argument('--limits', default='default,1000,50',
+    parser.add_argument('--limits', default='default,1000,100',
                         help="comma-separated reader sample limits, 'default' for Fast DDS's")
     parser.add_argument('--seed', type=int, default=1)
     parser.add_argument('--out', default=str(ROOT / 'bench' / 'results' / 'reader_pool.json'))

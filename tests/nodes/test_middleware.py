@@ -113,28 +113,96 @@ def test_the_profile_is_installed_with_the_package():
     assert text.count('<historyMemoryPolicy>DYNAMIC</historyMemoryPolicy>') == 2
 
 
-def test_readers_are_limited_below_fast_dds_default_and_above_every_readers_depth():
+def test_readers_keep_fast_dds_resource_limits():
+    # A lower sample limit does not bound what Fast DDS 2.14's keep-last readers leak
+    # behind resending writers; it makes the reader lose samples sooner (the profile's
+    # comment, docs/soak.md stop 54). The in-process test below would see a low one.
     from xml.etree import ElementTree
 
-    from rclpy.qos import qos_profile_parameters
-    from rclpy.qos import qos_profile_sensor_data
-
-    from fpc_gripper.io import qos
-
     ns = {'dds': 'http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles'}
-    readers = ElementTree.parse(PROFILE).getroot().findall('.//dds:data_reader', ns)
-    assert len(readers) == 1
-    limits = readers[0].find('dds:topic/dds:resourceLimitsQos', ns)
-    max_samples = int(limits.find('dds:max_samples', ns).text)
-    per_instance = int(limits.find('dds:max_samples_per_instance', ns).text)
-    # Fast DDS's default is 5000: the limit is what bounds a reader's pool of changes.
-    assert per_instance == max_samples < 5000
-    # Fast DDS would cut a keep-last reader deeper than the limit to it: none is.
-    depths = [qos_profile_parameters.depth, qos_profile_sensor_data.depth] + [
-        getattr(qos, name).depth for name in qos.__all__ if name.endswith('_QOS')]
-    assert max(depths) == 1000 and max_samples >= max(depths)
-    assert not ElementTree.parse(PROFILE).getroot().findall('.//dds:data_writer/dds:topic',
-                                                            ns)
+    root = ElementTree.parse(PROFILE).getroot()
+    assert len(root.findall('.//dds:data_reader', ns)) == 1
+    assert not root.findall('.//dds:resourceLimitsQos', ns)
+    assert not root.findall('.//dds:data_writer/dds:topic', ns)
+
+
+# One process, so Fast DDS delivers within it. rclpy's parameter services (1000 deep) must
+# take 1000 requests sent together, with the server's executor not spinning meanwhile, and
+# answer them all; a keep-all reader, not taking while a writer of the same process sends
+# 3000 samples, must get them all. Within a process Fast DDS counts what a full reader
+# refused as delivered (between processes it sends it again): under a profile that limits
+# readers to 100 samples the burst gave the first 100 and the requests 100 answers of 150.
+_AT_ONCE = r"""
+import json, time
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.parameter import Parameter
+from rclpy.qos import HistoryPolicy, qos_profile_parameters, QoSProfile, ReliabilityPolicy
+from rcl_interfaces.srv import GetParameters, SetParameters
+from std_msgs.msg import Int32
+from fpc_gripper.nodes.middleware import apply_middleware_settings
+
+REQUESTS, BURST = 1000, 3000
+applied = apply_middleware_settings()
+rclpy.init()
+server = rclpy.create_node('server')
+server.declare_parameter('x', 0)
+client_node = rclpy.create_node('client')
+# As rclpy's AsyncParameterClient (and ros2 param) make them
+setter = client_node.create_client(SetParameters, '/server/set_parameters',
+                                   qos_profile=qos_profile_parameters)
+getter = client_node.create_client(GetParameters, '/server/get_parameters',
+                                   qos_profile=qos_profile_parameters)
+server_executor, client_executor = SingleThreadedExecutor(), SingleThreadedExecutor()
+server_executor.add_node(server)
+client_executor.add_node(client_node)
+
+def spin_until(done, seconds):
+    deadline = time.monotonic() + seconds
+    while not done() and time.monotonic() < deadline:
+        server_executor.spin_once(timeout_sec=0.01)
+        client_executor.spin_once(timeout_sec=0.01)
+
+spin_until(lambda: setter.service_is_ready() and getter.service_is_ready(), 30)
+futures = [setter.call_async(SetParameters.Request(
+    parameters=[Parameter('x', value=i).to_parameter_msg()])) for i in range(REQUESTS)]
+for _ in range(20):
+    client_executor.spin_once(timeout_sec=0.01)
+keep_all = QoSProfile(depth=0, history=HistoryPolicy.KEEP_ALL,
+                      reliability=ReliabilityPolicy.RELIABLE)
+got = []
+server.create_subscription(Int32, 'burst', lambda m: got.append(m.data), keep_all)
+burst = client_node.create_publisher(Int32, 'burst', keep_all)
+spin_until(lambda: burst.get_subscription_count() > 0, 30)
+for i in range(BURST):
+    burst.publish(Int32(data=i))
+time.sleep(0.5)
+spin_until(lambda: all(f.done() for f in futures) and len(got) >= BURST, 60)
+spin_until(lambda: False, 1.0)  # anything more that would come
+last = getter.call_async(GetParameters.Request(names=['x']))
+spin_until(last.done, 30)
+print(json.dumps({
+    'profile': applied.get('FASTRTPS_DEFAULT_PROFILES_FILE'),
+    'answered': sum(f.done() and all(r.successful for r in f.result().results)
+                    for f in futures),
+    'x': last.result().values[0].integer_value if last.done() else None,
+    'burst': got}))
+"""
+
+
+def test_a_process_takes_a_burst_its_readers_ask_for_at_once():
+    environ = {k: v for k, v in _allocator_env().items()
+               if k not in ('FASTRTPS_DEFAULT_PROFILES_FILE', 'RMW_FASTRTPS_USE_QOS_FROM_XML')}
+    done = subprocess.run([sys.executable, '-c', _AT_ONCE], env=environ,
+                          capture_output=True, text=True, timeout=240)
+    assert done.returncode == 0, done.stderr
+    assert 'XMLPARSER' not in done.stdout + done.stderr
+    result = json.loads(done.stdout.strip().splitlines()[-1])
+    assert result['profile'] == str(PROFILE)
+    assert result['answered'] == 1000
+    # The requests are taken in order, so the last one sent is the value that stays.
+    assert result['x'] == 999
+    assert result['burst'] == list(range(3000))
 
 
 # A reliable keep-all reader that lets 12 messages of 1 MB queue before it takes any, then
