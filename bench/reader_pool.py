@@ -152,6 +152,8 @@ def in_use(path):
 
 
 def run(args):
+    from soak import stop_process                  # SIGINT, then SIGTERM and SIGKILL
+
     limits = [None if text == 'default' else int(text) for text in args.limits.split(',')]
     work = pathlib.Path(tempfile.mkdtemp(prefix='reader_pool_'))
     base = int(os.environ.get('ROS_DOMAIN_ID', '0'))
@@ -177,14 +179,8 @@ def run(args):
         stall([p[2].pid for p in pairs], args.duration, args.seed)
     finally:
         for _, _, read, write, log in pairs:
-            read.send_signal(signal.SIGINT)
-            write.terminate()
-            for process in (read, write):
-                try:
-                    process.wait(timeout=30)
-                except subprocess.TimeoutExpired:
-                    process.kill()
-                    process.wait()
+            stop_process(read, 30.0)
+            stop_process(write, 30.0)
             log.close()
     results = {'depth': args.depth, 'duration_s': args.duration, 'seed': args.seed,
                'workdir': str(work), 'readers': {}, 'taken': {}}

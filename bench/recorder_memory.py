@@ -18,7 +18,6 @@ import json
 import math
 import os
 import pathlib
-import signal
 import subprocess
 import sys
 import tempfile
@@ -34,7 +33,7 @@ from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
 from rclpy.serialization import serialize_message
 from sensor_msgs.msg import FluidPressure
-from soak import slope_per_hour  # bench/ is sys.path[0] when a bench script runs
+from soak import slope_per_hour, stop_process  # bench/ is sys.path[0] for a bench
 from std_msgs.msg import Float64
 
 from fpc_gripper.io.messages import serialized_shape, STATE_QOS
@@ -142,13 +141,7 @@ def main(argv=None):
     finally:
         running.clear()
         publisher.join(timeout=5.0)
-        if recorder.poll() is None:
-            recorder.send_signal(signal.SIGINT)
-            try:
-                recorder.wait(timeout=60.0)
-            except subprocess.TimeoutExpired:
-                recorder.kill()
-                recorder.wait()
+        stop_process(recorder, 60.0)
         node.destroy_node()
         rclpy.try_shutdown(context=context)
     log = log_path.read_text(errors='replace')

@@ -158,6 +158,27 @@ class ProcessStats:
                 'cpu_pct': pct}
 
 
+def stop_process(process, timeout=STOP_TIMEOUT_S):
+    """
+    Stop a child as Ctrl-C would: SIGINT, then SIGTERM and SIGKILL if it does not end.
+
+    Waits `timeout` [s] after SIGINT and 10 s after each of the others. Returns the last
+    signal sent (None when the process had ended already).
+    """
+    sent = None
+    for sig, wait in ((signal.SIGINT, timeout), (signal.SIGTERM, 10.0),
+                      (signal.SIGKILL, 10.0)):
+        if process.poll() is not None:
+            break
+        sent = sig
+        process.send_signal(sig)
+        try:
+            process.wait(timeout=wait)
+        except subprocess.TimeoutExpired:
+            continue
+    return sent
+
+
 class NodeProcess:
     """One node in a child process: its log file, resource samples and a clean stop by PID."""
 
@@ -209,18 +230,10 @@ class NodeProcess:
         return self.stats.sample(wall)
 
     def stop(self, timeout=STOP_TIMEOUT_S):
-        """SIGINT, then SIGTERM and SIGKILL if it does not end in time; return the exit code."""
+        """`stop_process` with `timeout` [s] after SIGINT; return the exit code."""
         start = time.monotonic()
-        for sig, wait in ((signal.SIGINT, timeout), (signal.SIGTERM, 10.0),
-                          (signal.SIGKILL, 10.0)):
-            if self.poll() is not None:
-                break
-            self.forced = sig != signal.SIGINT
-            self.process.send_signal(sig)
-            try:
-                self.process.wait(timeout=wait)
-            except subprocess.TimeoutExpired:
-                continue
+        if self.poll() is None:
+            self.forced = stop_process(self.process, timeout) not in (None, signal.SIGINT)
         self.poll()
         self.stop_s = time.monotonic() - start
         return self.exit_code

@@ -506,3 +506,23 @@ def test_the_reader_pool_bench_varies_only_the_readers_sample_limit():
     # Everything else is the package's profile.
     block = re.compile(r'\s*<topic>\s*<resourceLimitsQos>.*?</topic>', re.DOTALL)
     assert block.sub('', profile_text(100)) == PROFILE.read_text()
+
+
+def test_stop_process_escalates_only_as_far_as_it_must():
+    import signal
+
+    from soak import stop_process
+
+    def child(code):
+        process = subprocess.Popen([sys.executable, '-c', code], stdout=subprocess.PIPE)
+        assert process.stdout.readline() == b'ready\n'   # its handlers are set
+        return process
+
+    ends_on_sigint = child('import time; print("ready", flush=True); time.sleep(60)')
+    assert stop_process(ends_on_sigint, 10.0) == signal.SIGINT
+    assert ends_on_sigint.returncode != 0
+    ignores_sigint = child('import signal, time; signal.signal(signal.SIGINT, signal.SIG_IGN); '
+                           'print("ready", flush=True); time.sleep(60)')
+    assert stop_process(ignores_sigint, 0.2) == signal.SIGTERM
+    assert ignores_sigint.returncode == -signal.SIGTERM
+    assert stop_process(ignores_sigint, 0.2) is None             # ended already
