@@ -40,7 +40,10 @@ TF_STATIC_QOS = QoSProfile(depth=1, history=HistoryPolicy.KEEP_LAST,
 #: at its rate (`writer_qos`); unset or 0 keeps the conventions' depths above. A reliable
 #: writer resends only what its keep-last history still holds, so the writer's depth, not
 #: the recorder's keep-all reader, decides what a recorder that stalls loses. The cost
-#: under saturation is measured in docs/soak.md ("Writer histories as an option").
+#: under saturation is measured in docs/soak.md ("Writer histories as an option"): behind
+#: such writers Fast DDS 2.14's keep-last readers leak the older samples resent to them
+#: until their pools are full, then refuse samples when they fall behind (stop 54), so it
+#: is for short recordings.
 WRITER_HISTORY_ENV = 'FPC_GRIPPER_WRITER_HISTORY_S'
 #: The most history the variable may ask for [s]: 10 s of 10 KB shapes at 200 Hz is 20 MB
 #: per finger.
