@@ -518,7 +518,10 @@ def test_stop_process_escalates_only_as_far_as_it_must():
         assert process.stdout.readline() == b'ready\n'   # its handlers are set
         return process
 
-    ends_on_sigint = child('import time; print("ready", flush=True); time.sleep(60)')
+    # Python leaves SIGINT ignored when it starts so (a background job's): set its handler.
+    ends_on_sigint = child('import signal, time; '
+                           'signal.signal(signal.SIGINT, signal.default_int_handler); '
+                           'print("ready", flush=True); time.sleep(60)')
     assert stop_process(ends_on_sigint, 10.0) == signal.SIGINT
     assert ends_on_sigint.returncode != 0
     ignores_sigint = child('import signal, time; signal.signal(signal.SIGINT, signal.SIG_IGN); '
