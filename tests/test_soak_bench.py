@@ -529,3 +529,29 @@ def test_stop_process_escalates_only_as_far_as_it_must():
     assert stop_process(ignores_sigint, 0.2) == signal.SIGTERM
     assert ignores_sigint.returncode == -signal.SIGTERM
     assert stop_process(ignores_sigint, 0.2) is None             # ended already
+
+
+def test_a_node_process_stops_on_sigint_and_says_when_it_was_forced(tmp_path):
+    import signal
+    import time
+
+    from soak import NodeProcess
+
+    def started(name, code):
+        node = NodeProcess(name, [sys.executable, '-c', code], tmp_path / f'{name}.log')
+        deadline = time.monotonic() + 60.0
+        while 'ready' not in node.log_text() and time.monotonic() < deadline:
+            time.sleep(0.02)
+        assert 'ready' in node.log_text()
+        return node
+
+    clean = started('model_node', 'import signal, sys, time; '
+                    'signal.signal(signal.SIGINT, lambda *_: sys.exit(0)); '
+                    'print("ready", flush=True); time.sleep(60)')
+    assert clean.stop(10.0) == 0 and not clean.forced
+    assert clean.stop(10.0) == 0 and not clean.forced           # ended already: not forced
+    stubborn = started('gripper_controller', 'import signal, time; '
+                       'signal.signal(signal.SIGINT, signal.SIG_IGN); '
+                       'print("ready", flush=True); time.sleep(60)')
+    assert stubborn.stop(0.2) == -signal.SIGTERM and stubborn.forced
+    assert stubborn.stop(0.2) == -signal.SIGTERM                # ended already: as it was
