@@ -17,6 +17,8 @@ from rclpy.logging import get_logger
 from rclpy.signals import SignalHandlerOptions
 from rclpy.utilities import remove_ros_args
 
+from fpc_gripper.io.qos import WRITER_HISTORY_ENV
+from fpc_gripper.io.qos import writer_history_s
 from fpc_gripper.nodes.executor_watch import ExecutorWatch
 from fpc_gripper.nodes.heap_trim import HeapTrim
 from fpc_gripper.nodes.middleware import apply_middleware_settings
@@ -181,6 +183,18 @@ def _flush_stops(nodes, executor):
         executor.spin_once(timeout_sec=0.01)
 
 
+def _warn_of_writer_history(name):
+    """Log once per process what the writer-history option costs, when it is set."""
+    history_s = writer_history_s()           # a bad value raises ValueError: a start error
+    if history_s > 0.0:
+        get_logger(name).warning(
+            f'{WRITER_HISTORY_ENV}={history_s:g}: writers keep {history_s:g} s of history; '
+            "behind them Fast DDS 2.14's keep-last readers leak the older samples resent "
+            'to them until their sample pools are full, after which a reader that falls '
+            'behind refuses samples: use it for recordings shorter than an hour '
+            '(README, Topics and QoS)')
+
+
 def run_node(build, name, args=None, check=None):
     """
     Build a node (or several), spin until SIGINT or SIGTERM, destroy them, shut rclpy down.
@@ -227,6 +241,7 @@ def run_node(build, name, args=None, check=None):
             rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
             built = build()
             nodes = tuple(built) if isinstance(built, (list, tuple)) else (built,)
+            _warn_of_writer_history(name)
             if settings_wanted(os.environ):
                 # The allocator settings' other half: pages freed amid the heap go back.
                 nodes[0].heap_trim = HeapTrim(nodes[0])
