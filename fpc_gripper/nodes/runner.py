@@ -238,10 +238,10 @@ def run_node(build, name, args=None, check=None):
     try:
         try:
             apply_middleware_settings()
+            _warn_of_writer_history(name)
             rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
             built = build()
             nodes = tuple(built) if isinstance(built, (list, tuple)) else (built,)
-            _warn_of_writer_history(name)
             if settings_wanted(os.environ):
                 # The allocator settings' other half: pages freed amid the heap go back.
                 nodes[0].heap_trim = HeapTrim(nodes[0])
